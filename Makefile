@@ -1,0 +1,55 @@
+# pickplace — one command each on a fresh machine: `make run`, `make test`.
+PYTHON ?= python3
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+WEB_DEPS := web/node_modules/.package-lock.json
+
+.PHONY: install run test test-fast lint proto bench clean browser up up-local
+
+install: $(STAMP) $(WEB_DEPS) browser
+
+$(STAMP): pyproject.toml
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e ".[dev]"
+	@touch $(STAMP)
+
+# The dashboard's three.js + urdf-loader from the npm registry, served by the gateway (no CDN).
+$(WEB_DEPS): web/package.json web/package-lock.json
+	cd web && npm ci --no-audit --no-fund --loglevel=error
+	@touch $(WEB_DEPS)
+
+# Debian's chromium for the dashboard's browser test (Playwright drives it; nothing downloaded by Playwright).
+browser:
+	@test -x /usr/bin/chromium || { echo "installing chromium (apt-get) for the dashboard browser test"; \
+	  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null) \
+	  || echo "could not install chromium: run 'sudo apt-get install chromium'"; }
+
+run: install
+	$(VENV)/bin/pickplace up
+
+test: install
+	MUJOCO_GL=egl $(PY) -m pytest -q
+
+lint: install
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check services gateway tests bench || true
+
+proto: install
+	$(PY) -m services.common.protogen
+
+bench: install
+	MUJOCO_GL=egl $(PY) -m bench
+
+clean:
+	rm -rf $(VENV) .pytest_cache .ruff_cache build *.egg-info web/node_modules
+
+# The whole cell as containers (needs Docker and a filled-in .env, see .env.example).
+up:
+	@test -f .env || { echo "copy .env.example to .env and set the passwords and the API token first"; exit 1; }
+	docker compose up --build
+
+# The same topology as separate OS processes on loopback (no Docker); Ctrl-C stops them all.
+up-local: install
+	MUJOCO_GL=egl $(PY) -m services.launcher up

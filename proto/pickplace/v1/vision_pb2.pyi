@@ -1,0 +1,173 @@
+from pickplace.v1 import common_pb2 as _common_pb2
+from google.protobuf.internal import containers as _containers
+from google.protobuf import descriptor as _descriptor
+from google.protobuf import message as _message
+from collections.abc import Iterable as _Iterable, Mapping as _Mapping
+from typing import ClassVar as _ClassVar, Optional as _Optional, Union as _Union
+
+DESCRIPTOR: _descriptor.FileDescriptor
+
+class Vec3(_message.Message):
+    __slots__ = ("x", "y", "z")
+    X_FIELD_NUMBER: _ClassVar[int]
+    Y_FIELD_NUMBER: _ClassVar[int]
+    Z_FIELD_NUMBER: _ClassVar[int]
+    x: float
+    y: float
+    z: float
+    def __init__(self, x: _Optional[float] = ..., y: _Optional[float] = ..., z: _Optional[float] = ...) -> None: ...
+
+class CameraIntrinsics(_message.Message):
+    __slots__ = ("width", "height", "fx", "fy", "cx", "cy", "distortion")
+    WIDTH_FIELD_NUMBER: _ClassVar[int]
+    HEIGHT_FIELD_NUMBER: _ClassVar[int]
+    FX_FIELD_NUMBER: _ClassVar[int]
+    FY_FIELD_NUMBER: _ClassVar[int]
+    CX_FIELD_NUMBER: _ClassVar[int]
+    CY_FIELD_NUMBER: _ClassVar[int]
+    DISTORTION_FIELD_NUMBER: _ClassVar[int]
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    distortion: _containers.RepeatedScalarFieldContainer[float]
+    def __init__(self, width: _Optional[int] = ..., height: _Optional[int] = ..., fx: _Optional[float] = ..., fy: _Optional[float] = ..., cx: _Optional[float] = ..., cy: _Optional[float] = ..., distortion: _Optional[_Iterable[float]] = ...) -> None: ...
+
+class RGBDFrame(_message.Message):
+    __slots__ = ("header", "intrinsics", "color_rgb8", "depth_u16", "depth_scale")
+    HEADER_FIELD_NUMBER: _ClassVar[int]
+    INTRINSICS_FIELD_NUMBER: _ClassVar[int]
+    COLOR_RGB8_FIELD_NUMBER: _ClassVar[int]
+    DEPTH_U16_FIELD_NUMBER: _ClassVar[int]
+    DEPTH_SCALE_FIELD_NUMBER: _ClassVar[int]
+    header: _common_pb2.Header
+    intrinsics: CameraIntrinsics
+    color_rgb8: bytes
+    depth_u16: bytes
+    depth_scale: float
+    def __init__(self, header: _Optional[_Union[_common_pb2.Header, _Mapping]] = ..., intrinsics: _Optional[_Union[CameraIntrinsics, _Mapping]] = ..., color_rgb8: _Optional[bytes] = ..., depth_u16: _Optional[bytes] = ..., depth_scale: _Optional[float] = ...) -> None: ...
+
+class RodDetection(_message.Message):
+    __slots__ = ("center_camera", "axis_camera", "pose_camera", "has_base", "center_base", "axis_base", "pose_base", "length_m", "diameter_m", "confidence", "method", "n_depth_points")
+    CENTER_CAMERA_FIELD_NUMBER: _ClassVar[int]
+    AXIS_CAMERA_FIELD_NUMBER: _ClassVar[int]
+    POSE_CAMERA_FIELD_NUMBER: _ClassVar[int]
+    HAS_BASE_FIELD_NUMBER: _ClassVar[int]
+    CENTER_BASE_FIELD_NUMBER: _ClassVar[int]
+    AXIS_BASE_FIELD_NUMBER: _ClassVar[int]
+    POSE_BASE_FIELD_NUMBER: _ClassVar[int]
+    LENGTH_M_FIELD_NUMBER: _ClassVar[int]
+    DIAMETER_M_FIELD_NUMBER: _ClassVar[int]
+    CONFIDENCE_FIELD_NUMBER: _ClassVar[int]
+    METHOD_FIELD_NUMBER: _ClassVar[int]
+    N_DEPTH_POINTS_FIELD_NUMBER: _ClassVar[int]
+    center_camera: Vec3
+    axis_camera: Vec3
+    pose_camera: _common_pb2.Pose
+    has_base: bool
+    center_base: Vec3
+    axis_base: Vec3
+    pose_base: _common_pb2.Pose
+    length_m: float
+    diameter_m: float
+    confidence: float
+    method: str
+    n_depth_points: int
+    def __init__(self, center_camera: _Optional[_Union[Vec3, _Mapping]] = ..., axis_camera: _Optional[_Union[Vec3, _Mapping]] = ..., pose_camera: _Optional[_Union[_common_pb2.Pose, _Mapping]] = ..., has_base: _Optional[bool] = ..., center_base: _Optional[_Union[Vec3, _Mapping]] = ..., axis_base: _Optional[_Union[Vec3, _Mapping]] = ..., pose_base: _Optional[_Union[_common_pb2.Pose, _Mapping]] = ..., length_m: _Optional[float] = ..., diameter_m: _Optional[float] = ..., confidence: _Optional[float] = ..., method: _Optional[str] = ..., n_depth_points: _Optional[int] = ...) -> None: ...
+
+class CubeDetection(_message.Message):
+    __slots__ = ("centroid_camera", "pose_camera", "has_base", "centroid_base", "pose_base", "color_label", "n_points")
+    CENTROID_CAMERA_FIELD_NUMBER: _ClassVar[int]
+    POSE_CAMERA_FIELD_NUMBER: _ClassVar[int]
+    HAS_BASE_FIELD_NUMBER: _ClassVar[int]
+    CENTROID_BASE_FIELD_NUMBER: _ClassVar[int]
+    POSE_BASE_FIELD_NUMBER: _ClassVar[int]
+    COLOR_LABEL_FIELD_NUMBER: _ClassVar[int]
+    N_POINTS_FIELD_NUMBER: _ClassVar[int]
+    centroid_camera: Vec3
+    pose_camera: _common_pb2.Pose
+    has_base: bool
+    centroid_base: Vec3
+    pose_base: _common_pb2.Pose
+    color_label: str
+    n_points: int
+    def __init__(self, centroid_camera: _Optional[_Union[Vec3, _Mapping]] = ..., pose_camera: _Optional[_Union[_common_pb2.Pose, _Mapping]] = ..., has_base: _Optional[bool] = ..., centroid_base: _Optional[_Union[Vec3, _Mapping]] = ..., pose_base: _Optional[_Union[_common_pb2.Pose, _Mapping]] = ..., color_label: _Optional[str] = ..., n_points: _Optional[int] = ...) -> None: ...
+
+class BoxBounds(_message.Message):
+    __slots__ = ("min", "max")
+    MIN_FIELD_NUMBER: _ClassVar[int]
+    MAX_FIELD_NUMBER: _ClassVar[int]
+    min: Vec3
+    max: Vec3
+    def __init__(self, min: _Optional[_Union[Vec3, _Mapping]] = ..., max: _Optional[_Union[Vec3, _Mapping]] = ...) -> None: ...
+
+class ObstacleBox(_message.Message):
+    __slots__ = ("camera", "has_base", "base", "color_label", "n_points")
+    CAMERA_FIELD_NUMBER: _ClassVar[int]
+    HAS_BASE_FIELD_NUMBER: _ClassVar[int]
+    BASE_FIELD_NUMBER: _ClassVar[int]
+    COLOR_LABEL_FIELD_NUMBER: _ClassVar[int]
+    N_POINTS_FIELD_NUMBER: _ClassVar[int]
+    camera: BoxBounds
+    has_base: bool
+    base: BoxBounds
+    color_label: str
+    n_points: int
+    def __init__(self, camera: _Optional[_Union[BoxBounds, _Mapping]] = ..., has_base: _Optional[bool] = ..., base: _Optional[_Union[BoxBounds, _Mapping]] = ..., color_label: _Optional[str] = ..., n_points: _Optional[int] = ...) -> None: ...
+
+class DetectedObjects(_message.Message):
+    __slots__ = ("header", "rods", "cubes", "obstacles", "timings_ms", "notes", "rod_detected", "calibrated")
+    class TimingsMsEntry(_message.Message):
+        __slots__ = ("key", "value")
+        KEY_FIELD_NUMBER: _ClassVar[int]
+        VALUE_FIELD_NUMBER: _ClassVar[int]
+        key: str
+        value: float
+        def __init__(self, key: _Optional[str] = ..., value: _Optional[float] = ...) -> None: ...
+    HEADER_FIELD_NUMBER: _ClassVar[int]
+    RODS_FIELD_NUMBER: _ClassVar[int]
+    CUBES_FIELD_NUMBER: _ClassVar[int]
+    OBSTACLES_FIELD_NUMBER: _ClassVar[int]
+    TIMINGS_MS_FIELD_NUMBER: _ClassVar[int]
+    NOTES_FIELD_NUMBER: _ClassVar[int]
+    ROD_DETECTED_FIELD_NUMBER: _ClassVar[int]
+    CALIBRATED_FIELD_NUMBER: _ClassVar[int]
+    header: _common_pb2.Header
+    rods: _containers.RepeatedCompositeFieldContainer[RodDetection]
+    cubes: _containers.RepeatedCompositeFieldContainer[CubeDetection]
+    obstacles: _containers.RepeatedCompositeFieldContainer[ObstacleBox]
+    timings_ms: _containers.ScalarMap[str, float]
+    notes: _containers.RepeatedScalarFieldContainer[str]
+    rod_detected: bool
+    calibrated: bool
+    def __init__(self, header: _Optional[_Union[_common_pb2.Header, _Mapping]] = ..., rods: _Optional[_Iterable[_Union[RodDetection, _Mapping]]] = ..., cubes: _Optional[_Iterable[_Union[CubeDetection, _Mapping]]] = ..., obstacles: _Optional[_Iterable[_Union[ObstacleBox, _Mapping]]] = ..., timings_ms: _Optional[_Mapping[str, float]] = ..., notes: _Optional[_Iterable[str]] = ..., rod_detected: _Optional[bool] = ..., calibrated: _Optional[bool] = ...) -> None: ...
+
+class DetectRequest(_message.Message):
+    __slots__ = ("frame", "include_debug_image")
+    FRAME_FIELD_NUMBER: _ClassVar[int]
+    INCLUDE_DEBUG_IMAGE_FIELD_NUMBER: _ClassVar[int]
+    frame: RGBDFrame
+    include_debug_image: bool
+    def __init__(self, frame: _Optional[_Union[RGBDFrame, _Mapping]] = ..., include_debug_image: _Optional[bool] = ...) -> None: ...
+
+class DetectResponse(_message.Message):
+    __slots__ = ("objects", "debug_jpeg")
+    OBJECTS_FIELD_NUMBER: _ClassVar[int]
+    DEBUG_JPEG_FIELD_NUMBER: _ClassVar[int]
+    objects: DetectedObjects
+    debug_jpeg: bytes
+    def __init__(self, objects: _Optional[_Union[DetectedObjects, _Mapping]] = ..., debug_jpeg: _Optional[bytes] = ...) -> None: ...
+
+class DebugImageRequest(_message.Message):
+    __slots__ = ()
+    def __init__(self) -> None: ...
+
+class DebugImage(_message.Message):
+    __slots__ = ("header", "jpeg")
+    HEADER_FIELD_NUMBER: _ClassVar[int]
+    JPEG_FIELD_NUMBER: _ClassVar[int]
+    header: _common_pb2.Header
+    jpeg: bytes
+    def __init__(self, header: _Optional[_Union[_common_pb2.Header, _Mapping]] = ..., jpeg: _Optional[bytes] = ...) -> None: ...
