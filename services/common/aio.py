@@ -1,0 +1,25 @@
+"""Running a command's top-level coroutine: Ctrl-C and SIGTERM cancel it cleanly."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import signal
+from collections.abc import Awaitable
+from typing import Any
+
+
+def run_until_signal(main: Awaitable[Any]) -> Any:
+    """``asyncio.run`` ``main`` with SIGINT/SIGTERM cancelling it (its cleanup runs); raises
+    ``asyncio.CancelledError`` when a signal stopped it."""
+
+    async def runner() -> Any:
+        task = asyncio.current_task()
+        assert task is not None
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            with contextlib.suppress(NotImplementedError):  # not on every platform's loop
+                loop.add_signal_handler(sig, task.cancel)
+        return await main
+
+    return asyncio.run(runner())

@@ -1,0 +1,120 @@
+"""The Prometheus metrics of pickplace (LLD §8.1), named in one place.
+
+Every service builds a :class:`CellMetrics` on its own :class:`CollectorRegistry`
+(never the process-global default, so two services in one process — ``pickplace up``
+— or in one test do not collide). In multi-process deployments (``PROMETHEUS_MULTIPROC_DIR``
+set, one process per service) the values are written to that directory by each process
+and :func:`exposition_registry` aggregates them for whichever process serves ``/metrics``.
+
+Names follow Prometheus conventions: base units in the name (``_seconds``, ``_radians``),
+``_total`` on counters (added by prometheus-client), low-cardinality labels.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+
+from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, generate_latest
+from prometheus_client import multiprocess as prom_multiprocess
+
+MULTIPROC_ENV = "PROMETHEUS_MULTIPROC_DIR"
+
+# Cycle times of a pick-and-place cell: seconds to a minute.
+CYCLE_TIME_BUCKETS_S = (2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 15.0, 20.0, 30.0, 45.0, 60.0, 120.0)
+# Vision and planning: milliseconds to seconds (LLD §16.1 latency budget).
+LATENCY_BUCKETS_S = (0.005, 0.01, 0.025, 0.05, 0.1, 0.2, 0.3, 0.5, 1.0, 2.0, 5.0, 10.0)
+
+
+def multiprocess_dir() -> str | None:
+    return os.environ.get(MULTIPROC_ENV) or None
+
+
+class CellMetrics:
+    """The LLD metric set on one registry. Services use the parts that concern them."""
+
+    def __init__(self, registry: CollectorRegistry | None = None):
+        self.registry = registry if registry is not None else CollectorRegistry(auto_describe=True)
+        r = self.registry
+        # In multi-process mode gauges need an aggregation rule; "mostrecent" keeps the newest value.
+        live = {"multiprocess_mode": "mostrecent"}
+        self.pick_success = Counter(
+            "pick_success", "Successful picks", ["robot_id", "object_class"], registry=r
+        )
+        self.pick_failure = Counter(
+            "pick_failure", "Failed picks", ["robot_id", "object_class", "stage"], registry=r
+        )
+        self.cycle_time = Histogram(
+            "cycle_time_seconds", "Pick-place cycle time", ["robot_id"], buckets=CYCLE_TIME_BUCKETS_S, registry=r
+        )
+        self.grasp_quality = Gauge(
+            "grasp_quality", "Quality score [0, 1] of the latest executed grasp", ["robot_id"], registry=r, **live
+        )
+        self.vision_latency = Histogram(
+            "vision_latency_seconds",
+            "Vision pipeline latency per stage",
+            ["stage"],  # detect | pose_estimate | total
+            buckets=LATENCY_BUCKETS_S,
+            registry=r,
+        )
+        self.planning_latency = Histogram(
+            "planning_latency_seconds",
+            "Motion/grasp planning latency per planner",
+            ["planner"],
+            buckets=LATENCY_BUCKETS_S,
+            registry=r,
+        )
+        self.joint_position = Gauge(
+            "robot_joint_position_radians", "Measured joint position", ["robot_id", "joint"], registry=r, **live
+        )
+        self.robot_mode = Gauge(
+            "robot_mode", "Dobot RobotMode code (5 = enabled idle, 7 = running, 9 = error)", ["robot_id"],
+            registry=r, **live,
+        )
+        self.estop = Counter(
+            "emergency_stop", "Emergency stops requested", ["robot_id", "source"], registry=r
+        )
+        self.picks_persisted = Counter(
+            "picks_persisted", "Pick events written to the database", registry=r
+        )
+        self.pick_buffer_depth = Gauge(
+            "pick_buffer_depth", "Pick events waiting for the database", registry=r, **live
+        )
+
+    def observe_pick(
+        self,
+        robot_id: str,
+        object_class: str,
+        success: bool,
+        cycle_time_s: float,
+        grasp_quality: float | None,
+        stage: str = "",
+    ) -> None:
+        obj = object_class or "unknown"
+        if success:
+            self.pick_success.labels(robot_id, obj).inc()
+            if cycle_time_s > 0:
+                self.cycle_time.labels(robot_id).observe(cycle_time_s)
+        else:
+            self.pick_failure.labels(robot_id, obj, stage or "unknown").inc()
+        if grasp_quality is not None and grasp_quality > 0:
+            self.grasp_quality.labels(robot_id).set(grasp_quality)
+
+    def set_joint_positions(self, robot_id: str, names: Sequence[str], positions_rad: Sequence[float]) -> None:
+        for name, q in zip(names, positions_rad, strict=False):
+            self.joint_position.labels(robot_id, name).set(q)
+
+
+def exposition_registry(own: CollectorRegistry) -> CollectorRegistry:
+    """The registry ``/metrics`` should render: every process's values in multi-process mode, else ``own``."""
+    path = multiprocess_dir()
+    if path is None:
+        return own
+    agg = CollectorRegistry()
+    prom_multiprocess.MultiProcessCollector(agg, path=path)
+    return agg
+
+
+def render(own: CollectorRegistry) -> bytes:
+    """Prometheus text exposition of ``own`` (or of every process, in multi-process mode)."""
+    return generate_latest(exposition_registry(own))

@@ -1,0 +1,336 @@
+"""The robot driver core: safety-checked operations on one Dobot controller.
+
+One implementation for the real Nova5 and the simulated one (the robot is
+simulated at the wire). Every command is checked by :class:`SafetyLimits`
+before it leaves; failed motion steps follow seed 001's policy (clear the
+error, re-enable, wait, retry up to N times, then raise); stop and e-stop
+bypass everything else and abort trajectory streaming at once.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import time
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+from typing import TypeVar
+
+import numpy as np
+
+from services.common.errors import (
+    ControllerError,
+    EmergencyStopError,
+    ExecutionError,
+    InvalidInputError,
+    RobotCommunicationError,
+    TrajectoryExecutionError,
+)
+from services.common.settings import Settings
+from services.motion import analytic
+from services.motion.robot_models import RobotSpec
+from services.motion.trajectory import JointTrajectory
+from services.robot.client import DobotClient, FeedbackState
+from services.robot.gripper import DigitalOutputGripper, GripperState
+from services.robot.protocol import RobotMode
+from services.robot.safety import SafetyLimits
+
+log = logging.getLogger("pickplace.robot.driver")
+
+T = TypeVar("T")
+
+START_TOLERANCE_RAD = np.deg2rad(1.0)  # a trajectory must start this close to the measured joints
+
+
+@dataclass(frozen=True)
+class MoveResult:
+    final_q: np.ndarray
+    duration_s: float
+    attempts: int
+    stopped_early: bool = False  # a guarded move's stop condition fired
+
+
+StopCondition = Callable[[FeedbackState], bool]
+
+
+class RobotDriver:
+    def __init__(
+        self,
+        client: DobotClient,
+        spec: RobotSpec,
+        settings: Settings,
+        T_flange_tool: np.ndarray | None = None,
+    ):
+        self.client = client
+        self.spec = spec
+        self.settings = settings
+        self.limits = SafetyLimits(
+            spec, settings.robot.workspace, settings.robot.max_velocity_scale, T_flange_tool
+        )
+        self.gripper = DigitalOutputGripper(client, settings.gripper)
+        self._abort = asyncio.Event()
+        self._motion_lock = asyncio.Lock()
+
+    async def start(self) -> None:
+        await self.client.connect()
+        await self.client.speed_factor(self.settings.robot.speed_ratio)
+
+    # ------------------------------------------------------------------ state
+    @property
+    def feedback(self) -> FeedbackState:
+        fb = self.client.feedback
+        if fb is None:
+            raise RobotCommunicationError("no feedback received from the controller yet")
+        return fb
+
+    def joint_positions(self) -> np.ndarray:
+        return self.feedback.q.copy()
+
+    # ------------------------------------------------------------------ power
+    async def enable(self) -> None:
+        fb = self.client.feedback
+        if fb is not None and fb.in_error:
+            await self.client.clear_error()
+        await self.client.enable()
+        await self.client.wait_feedback(
+            lambda f: f.robot_mode in (RobotMode.ENABLE, RobotMode.RUNNING),
+            self.settings.robot.request_timeout_s,
+        )
+
+    async def disable(self) -> None:
+        self._abort.set()
+        await self.client.disable()
+
+    async def clear_error(self) -> None:
+        await self.client.clear_error()
+
+    async def recover(self) -> None:
+        """Seed 001's recovery step: clear the error, re-enable, wait."""
+        await self.client.clear_error()
+        await self.client.enable()
+        if self.settings.robot.retry_wait_s > 0:
+            await asyncio.sleep(self.settings.robot.retry_wait_s)
+
+    # ------------------------------------------------------------------ stop
+    async def stop(self) -> None:
+        """Stop queued motion and abort any trajectory being streamed."""
+        self._abort.set()
+        await self.client.stop()
+
+    async def emergency_stop(self, release: bool = False) -> None:
+        """Press (or release) the software e-stop. Sent before anything else is looked at."""
+        if not release:
+            self._abort.set()
+        await self.client.emergency_stop(press=not release)
+
+    # ------------------------------------------------------------------ motion
+    async def _with_retries(self, what: str, step: Callable[[], Awaitable[T]]) -> tuple[T, int]:
+        retries = self.settings.robot.step_retries
+        last: Exception | None = None
+        for attempt in range(retries + 1):
+            try:
+                return await step(), attempt + 1
+            except ControllerError as exc:
+                last = exc
+                if self._abort.is_set():
+                    break
+                log.warning("%s failed (attempt %d/%d): %s", what, attempt + 1, retries + 1, exc)
+                if attempt < retries:
+                    await self.recover()
+        raise TrajectoryExecutionError(f"{what} failed after {retries + 1} attempts: {last}") from last
+
+    async def move_joints(
+        self, q_goal: np.ndarray, speed_ratio: int | None = None, linear: bool = False
+    ) -> MoveResult:
+        q_goal = self.limits.check_all(np.asarray(q_goal, dtype=float))
+        v = None if speed_ratio is None else int(speed_ratio)
+        if v is not None and not 1 <= v <= 100:
+            raise InvalidInputError(f"speed_ratio must be 1-100, got {v}")
+        async with self._motion_lock:
+            self._abort.clear()
+            t0 = time.perf_counter()
+
+            async def step() -> FeedbackState:
+                if linear:
+                    rid = await self.client.mov_l(q_goal, v=v)
+                else:
+                    rid = await self.client.mov_j(q_goal, v=v)
+                return await self.client.wait_motion_done(rid, self.settings.robot.motion_timeout_s)
+
+            fb, attempts = await self._with_retries("MoveJoints", step)
+            return MoveResult(fb.q.copy(), time.perf_counter() - t0, attempts)
+
+    def _servo_targets(self, traj: JointTrajectory, period: float) -> np.ndarray:
+        n = max(1, int(np.ceil(traj.duration / period)))
+        ts = np.minimum(np.arange(1, n + 1) * period, traj.duration)
+        q = traj.sample(ts, derivatives=0)[0]
+        return np.atleast_2d(q)
+
+    async def execute_trajectory(
+        self,
+        traj: JointTrajectory,
+        servo_period_s: float | None = None,
+        stop_when: StopCondition | None = None,
+    ) -> MoveResult:
+        """Stream the trajectory as ServoJ targets, one per period, in real time.
+
+        Checked first, as a whole: joint names, the start against the measured
+        joints, every streamed target against joint and workspace limits, and the
+        joint speeds between targets. Streaming stops at once on stop/e-stop or
+        when the controller alarms. A guarded move passes ``stop_when``: as soon as a
+        feedback packet satisfies it the queue is stopped and the result says so.
+        """
+        if tuple(traj.joint_names) != tuple(self.spec.joint_names):
+            raise InvalidInputError(
+                f"trajectory joints {list(traj.joint_names)} do not match the robot's {list(self.spec.joint_names)}"
+            )
+        period = servo_period_s or self.settings.robot.servo_period_s
+        if not 0.004 <= period <= 1.0:
+            raise InvalidInputError(f"servo period must be within 4 ms..1 s, got {period}")
+        q_now = self.joint_positions()
+        start_err = float(np.max(np.abs(traj.positions[0] - q_now)))
+        if start_err > START_TOLERANCE_RAD:
+            raise InvalidInputError(
+                f"trajectory starts {np.rad2deg(start_err):.2f}° away from the measured joints "
+                f"(tolerance {np.rad2deg(START_TOLERANCE_RAD):.1f}°); plan from the current state"
+            )
+        targets = self._servo_targets(traj, period)
+        self.limits.check_all(targets, "trajectory")
+        self.limits.check_velocities(targets, period, q_start=q_now)
+        fb = self.feedback
+        if fb.estop:
+            raise EmergencyStopError("emergency stop is active")
+        if fb.in_error:
+            raise ControllerError("controller is in alarm; clear it before executing a trajectory")
+        async with self._motion_lock:
+            self._abort.clear()
+            if stop_when is None:
+                return await self._stream(targets, period)
+            return await self._guarded(targets, period, stop_when)
+
+    async def _stream(self, targets: np.ndarray, period: float) -> MoveResult:
+        """Send ServoJ targets, keeping at most ``servo_lookahead`` queued ahead of the one the
+        controller is executing (flow control by CurrentCommandId from the feedback stream).
+        Pacing therefore follows the controller's own clock — real time on hardware, any speed
+        in the simulator — and the controller never starves nor builds a long queue."""
+        loop = asyncio.get_running_loop()
+        t0 = loop.time()
+        window = self.settings.robot.servo_lookahead
+        ids: list[int | None] = []
+        for k, q in enumerate(targets):
+            while True:
+                if self._abort.is_set():
+                    raise ExecutionError(f"trajectory aborted by stop at step {k}/{len(targets)}")
+                fb = self.feedback
+                if fb.estop:
+                    raise EmergencyStopError(f"emergency stop during trajectory step {k}")
+                if fb.in_error:
+                    alarm_ids, text = await self.client.describe_alarms()
+                    raise ControllerError(
+                        f"controller alarm during trajectory step {k}: {text}", alarms=tuple(alarm_ids)
+                    )
+                ahead = k - self._executed_index(ids, fb.current_command_id)
+                if ahead <= window:
+                    break
+                await self.client.next_feedback()
+            ids.append(await self.client.servo_j(q, period))
+        fb = await self.client.wait_motion_done(
+            ids[-1], max(self.settings.robot.motion_timeout_s, 2 * period)
+        )
+        return MoveResult(fb.q.copy(), loop.time() - t0, 1)
+
+    async def _guarded(self, targets: np.ndarray, period: float, stop_when: StopCondition) -> MoveResult:
+        """Stream while watching every feedback packet; the first one that satisfies
+        ``stop_when`` cancels streaming and stops the controller's queue."""
+        loop = asyncio.get_running_loop()
+        fired = asyncio.Event()
+        t0 = loop.time()
+
+        def watch(fb: FeedbackState) -> None:
+            if not fired.is_set() and stop_when(fb):
+                fired.set()
+
+        self.client.add_listener(watch)
+        stream = asyncio.create_task(self._stream(targets, period), name="guarded-stream")
+        trigger = asyncio.create_task(fired.wait(), name="guarded-trigger")
+        try:
+            await asyncio.wait({stream, trigger}, return_when=asyncio.FIRST_COMPLETED)
+            if stream.done():
+                return stream.result()
+            stream.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await stream
+            await self.client.stop()
+            fb = await self.client.wait_feedback(lambda f: f.robot_mode != RobotMode.RUNNING, 2.0)
+            return MoveResult(fb.q.copy(), loop.time() - t0, 1, stopped_early=True)
+        finally:
+            trigger.cancel()
+            if not stream.done():
+                stream.cancel()
+            self.client.remove_listener(watch)
+
+    @staticmethod
+    def _executed_index(ids: list[int | None], current_id: int) -> int:
+        """Index of the newest sent target the controller has reached (-1 if none).
+        Without queue IDs (a ``{}`` firmware) nothing can be confirmed: count none as reached."""
+        reached = -1
+        for i, rid in enumerate(ids):
+            if rid is not None and rid <= current_id:
+                reached = i
+        return reached
+
+    # ------------------------------------------------------------------ grasp (LLD §13.2)
+    async def execute_grasp(self, T_base_tool: np.ndarray, approach_m: float = 0.10, lift_m: float = 0.10,
+                            speed_scale: float = 0.3) -> GripperState:
+        """Open, move above the grasp along the tool axis, descend in a straight line, close, lift.
+
+        Every segment is checked like any trajectory (joints, speed, workspace) before it is sent;
+        there is no obstacle avoidance here — the task service plans collision-free picks."""
+        from services.motion.cartesian import straight_line_joint_path
+        from services.motion.trajectory import JointLimits, min_jerk_keypose_trajectory
+
+        if self.limits.T_flange_tool is None:
+            raise InvalidInputError("ExecuteGrasp needs the gripper's tool offset (gripper.tcp_offset_m)")
+        for name, v in (("approach_distance", approach_m), ("lift_distance", lift_m)):
+            if not (np.isfinite(v) and 0.0 <= v <= 0.5):
+                raise InvalidInputError(f"{name} must be within 0..0.5 m, got {v}")
+        if not (np.isfinite(speed_scale) and 0.0 < speed_scale <= 1.0):
+            raise InvalidInputError(f"speed_scale must be within (0, 1], got {speed_scale}")
+        T_grasp = np.asarray(T_base_tool, dtype=float)
+        T_above = T_grasp.copy()
+        T_above[:3, 3] -= approach_m * T_grasp[:3, 2]  # back along the approach (tool z)
+        T_lift = T_grasp.copy()
+        T_lift[2, 3] += lift_m
+        limits = JointLimits.from_spec(self.spec, speed_scale, speed_scale)
+        q_now = self.joint_positions()
+        T_ft = self.limits.T_flange_tool
+        q_above = analytic.solve_nearest(self.spec, T_above @ np.linalg.inv(T_ft), q_now)
+
+        def timed(path: np.ndarray) -> JointTrajectory:
+            return min_jerk_keypose_trajectory(path, 0.05, 0.0, joint_names=self.spec.joint_names, limits=limits,
+                                               wrap=False)
+
+        # the whole motion is solved and checked before anything moves
+        down = straight_line_joint_path(self.spec, T_above, T_grasp, q_above, T_flange_tool=T_ft)
+        up = straight_line_joint_path(self.spec, T_grasp, T_lift, down[-1], T_flange_tool=T_ft)
+        for name, path in (("approach", np.vstack([q_now, q_above])), ("descent", down), ("lift", up)):
+            self.limits.check_all(path, f"grasp {name}")
+        await self.set_gripper(False)
+        await self.execute_trajectory(timed(np.vstack([q_now, q_above])))
+        await self.execute_trajectory(timed(_thin(down)))
+        state = await self.set_gripper(True)
+        await self.execute_trajectory(timed(_thin(up)))
+        return state
+
+    # ------------------------------------------------------------------ gripper
+    async def set_gripper(self, close: bool) -> GripperState:
+        return await (self.gripper.close() if close else self.gripper.open())
+
+
+def _thin(path: np.ndarray, knots: int = 20) -> np.ndarray:
+    """At most ``knots`` points of a dense path, always keeping its last point."""
+    if len(path) <= knots:
+        return path
+    idx = np.unique(np.append(np.linspace(0, len(path) - 1, knots).round().astype(int), len(path) - 1))
+    return path[idx]

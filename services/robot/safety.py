@@ -1,0 +1,78 @@
+"""Checks every command must pass before it leaves the driver (pure).
+
+Joint position limits, per-joint velocity limits of what is streamed, and the
+tool tip inside the configured workspace box. A violation raises
+LimitViolationError naming the joint / sample / coordinate — nothing is sent.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from services.common.errors import InvalidInputError, LimitViolationError
+from services.common.settings import WorkspaceBounds
+from services.motion import analytic
+from services.motion.robot_models import RobotSpec
+
+
+@dataclass(frozen=True)
+class SafetyLimits:
+    spec: RobotSpec
+    workspace: WorkspaceBounds
+    velocity_scale: float = 1.0  # fraction of the model's joint speed limits allowed
+    T_flange_tool: np.ndarray | None = None
+
+    def check_joints(self, q: np.ndarray, what: str = "joint target") -> np.ndarray:
+        q = np.asarray(q, dtype=float)
+        if q.shape[-1] != self.spec.dof:
+            raise InvalidInputError(f"{what} needs {self.spec.dof} joint values, got {q.shape[-1]}")
+        if not np.all(np.isfinite(q)):
+            raise InvalidInputError(f"{what} contains NaN or infinite values")
+        qs = q.reshape(-1, self.spec.dof)
+        bad = (qs < self.spec.lower - 1e-9) | (qs > self.spec.upper + 1e-9)
+        if bad.any():
+            k, j = (int(x[0]) for x in np.nonzero(bad))
+            raise LimitViolationError(
+                f"{what}{f' sample {k}' if qs.shape[0] > 1 else ''}: joint {j + 1} = "
+                f"{np.rad2deg(qs[k, j]):.3f}° is outside [{np.rad2deg(self.spec.lower[j]):.1f}°, "
+                f"{np.rad2deg(self.spec.upper[j]):.1f}°]; not sent"
+            )
+        return q
+
+    def check_workspace(self, q: np.ndarray, what: str = "joint target") -> None:
+        qs = np.asarray(q, dtype=float).reshape(-1, self.spec.dof)
+        T = analytic.fk(self.spec, qs, self.T_flange_tool)
+        p = T[:, :3, 3]
+        lo, hi = np.array(self.workspace.min), np.array(self.workspace.max)
+        bad = (p < lo) | (p > hi)
+        if bad.any():
+            k, axis = (int(x[0]) for x in np.nonzero(bad))
+            raise LimitViolationError(
+                f"{what}{f' sample {k}' if qs.shape[0] > 1 else ''}: tool tip at "
+                f"({p[k, 0]:.3f}, {p[k, 1]:.3f}, {p[k, 2]:.3f}) m leaves the workspace on "
+                f"{'xyz'[axis]} (bounds {lo[axis]:.3f}..{hi[axis]:.3f} m); not sent"
+            )
+
+    def check_velocities(self, q_samples: np.ndarray, dt: float, q_start: np.ndarray | None = None) -> None:
+        """Joint speeds implied by consecutive streamed samples (and the start) stay within limits."""
+        qs = np.asarray(q_samples, dtype=float).reshape(-1, self.spec.dof)
+        if q_start is not None:
+            qs = np.vstack([np.asarray(q_start, dtype=float)[None], qs])
+        if qs.shape[0] < 2:
+            return
+        speed = np.abs(np.diff(qs, axis=0)) / dt
+        vmax = self.spec.max_velocity * self.velocity_scale
+        bad = speed > vmax * (1 + 1e-6)
+        if bad.any():
+            k, j = (int(x[0]) for x in np.nonzero(bad))
+            raise LimitViolationError(
+                f"trajectory step {k}: joint {j + 1} would move at {np.rad2deg(speed[k, j]):.1f}°/s, "
+                f"above its limit {np.rad2deg(vmax[j]):.1f}°/s; not sent"
+            )
+
+    def check_all(self, q: np.ndarray, what: str = "joint target") -> np.ndarray:
+        q = self.check_joints(q, what)
+        self.check_workspace(q, what)
+        return q

@@ -1,0 +1,180 @@
+"""The simulated cell on Zenoh when it runs as its own process (``pickplace sim-dobot``).
+
+In one process (``pickplace up``) the vision service reads the twin's camera directly and
+the cell resets the scene between cycles itself. When every service is its own OS process
+(``pickplace up --processes``, docker compose, Kubernetes) the twin lives only in the
+sim-dobot process, so that process
+
+- publishes the simulated RealSense frames on ``CellKeys.camera_frames`` (the vision
+  service's ``vision.camera.source: bus`` consumes them), and
+- answers a Zenoh query on :func:`scene_reset_key`: lay out a fresh seeded scene (the
+  simulated operator lays the rod down again) with the arm where it is, then reply with
+  the new seed — so a caller knows frames published after the reply show the new scene.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import threading
+from typing import Any
+
+from services.common.bus import Bus
+from services.common.errors import InvalidInputError, RobotCommunicationError
+from services.common.keys import CellKeys
+from services.common.settings import Settings
+from services.sim.dobot_server import SimDobotServer
+from services.vision.camera import RGBDFrame
+
+log = logging.getLogger("pickplace.sim.bus")
+
+RESET_TIMEOUT_S = 30.0
+
+
+def scene_reset_key(cell_id: str) -> str:
+    return f"{CellKeys(cell_id).prefix}/sim/reset_scene"
+
+
+class CurrentCamera:
+    """A camera whose scene can be swapped: captures come from the twin's current camera."""
+
+    def __init__(self, camera: Any):
+        self._camera = camera
+        self._lock = threading.Lock()
+
+    def swap(self, camera: Any) -> Any:
+        with self._lock:
+            old, self._camera = self._camera, camera
+        return old
+
+    def capture(self) -> RGBDFrame:
+        with self._lock:
+            cam = self._camera
+            return cam.capture()  # under the lock: a swap waits for the frame in flight
+
+    def close(self) -> None:
+        with self._lock:
+            self._camera.close()
+
+
+def parse_seed(payload: bytes, current: int) -> int:
+    """The seed a reset query asks for: ``{"seed": n}``, or the next one when empty."""
+    if not payload:
+        return current + 1
+    try:
+        seed = json.loads(payload.decode())["seed"]
+    except (ValueError, KeyError, TypeError, UnicodeDecodeError) as exc:
+        raise InvalidInputError(f"scene reset payload must be JSON {{\"seed\": int}}, got {payload[:60]!r}") from exc
+    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
+        raise InvalidInputError(f"scene reset seed must be a non-negative integer, got {seed!r}")
+    return seed
+
+
+class SimBusLink:
+    """Camera frames out, scene resets in, for one running :class:`SimDobotServer` with the twin engine."""
+
+    def __init__(self, settings: Settings, server: SimDobotServer, bus: Bus, frames: bool = True,
+                 frame_rate: float | None = None):
+        self.settings = settings
+        self.frame_rate = frame_rate or settings.vision.rate_hz
+        self.server = server
+        self.bus = bus
+        self.frames = frames
+        self.seed = settings.sim.seed
+        self.camera: CurrentCamera | None = None
+        self.resets = 0
+        self._stop = asyncio.Event()
+        self._loop = asyncio.get_running_loop()
+        self._tasks: list[asyncio.Task[Any]] = []
+        self._queryable: Any = None
+        self._reset_lock = asyncio.Lock()
+
+    async def __aenter__(self) -> SimBusLink:
+        from services.sim.twin.camera import TwinCamera
+        from services.vision.service import publish_camera_frames
+
+        keys = CellKeys(self.settings.cell_id)
+        if self.frames:
+            cam = await asyncio.to_thread(TwinCamera, self.server.controller.engine, self.seed)
+            self.camera = CurrentCamera(cam)
+            self._tasks.append(asyncio.create_task(
+                publish_camera_frames(self.camera, self.bus, keys.camera_frames, self.frame_rate, self._stop),  # type: ignore[arg-type]
+                name="sim.frames"))
+        self._queryable = self.bus.session.declare_queryable(scene_reset_key(self.settings.cell_id), self._on_query)
+        log.info("sim on zenoh: frames %s on %s, scene reset on %s", "published" if self.frames else "off",
+                 keys.camera_frames, scene_reset_key(self.settings.cell_id))
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        self._stop.set()
+        if self._queryable is not None:
+            with contextlib.suppress(Exception):
+                self._queryable.undeclare()
+        for t in self._tasks:
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await asyncio.wait_for(t, 5.0)
+        if self.camera is not None:
+            await asyncio.to_thread(self.camera.close)
+
+    # ------------------------------------------------------------------ scene reset
+    def _on_query(self, query: Any) -> None:
+        """Zenoh thread: hand the query to the event loop (the query is answered from there)."""
+        payload = query.payload.to_bytes() if query.payload is not None else b""
+        with contextlib.suppress(RuntimeError):
+            self._loop.call_soon_threadsafe(lambda: self._tasks.append(
+                asyncio.create_task(self._answer(query, payload), name="sim.reset")))
+
+    async def _answer(self, query: Any, payload: bytes) -> None:
+        try:
+            seed = await self.reset_scene(parse_seed(payload, self.seed))
+            query.reply(query.key_expr, json.dumps({"seed": seed}).encode())
+        except Exception as exc:  # the caller gets the reason, the sim keeps running
+            log.warning("scene reset failed: %s", exc)
+            query.reply_err(json.dumps({"error": f"{type(exc).__name__}: {exc}"}).encode())
+        finally:
+            query.drop()
+
+    async def reset_scene(self, seed: int) -> int:
+        """A fresh seeded scene with the arm where it is now and the gripper outputs kept."""
+        from services.sim.twin import create_twin_engine
+        from services.sim.twin.camera import TwinCamera
+
+        if self.settings.sim.engine != "twin":
+            raise InvalidInputError(f"scene reset needs the twin engine, this sim runs {self.settings.sim.engine!r}")
+        async with self._reset_lock:
+            s = self.settings.model_copy(update={"sim": self.settings.sim.model_copy(update={"seed": seed})})
+            new = await asyncio.to_thread(create_twin_engine, s, seed)
+            with self.server.lock:
+                ctrl = self.server.controller
+                old = ctrl.engine
+                new.reset(ctrl.measured.q)
+                new.set_digital_outputs(ctrl.do_mask | (ctrl.tool_do_mask << 32))
+                ctrl.engine = new
+            if self.camera is not None:
+                cam = await asyncio.to_thread(TwinCamera, new, seed)
+                old_cam = self.camera.swap(cam)
+                await asyncio.to_thread(old_cam.close)
+            await asyncio.to_thread(old.close)
+            self.seed = seed
+            self.resets += 1
+            log.info("new twin scene, seed %d", seed)
+            return seed
+
+
+async def request_scene_reset(bus: Bus, cell_id: str, seed: int | None = None,
+                              timeout_s: float = RESET_TIMEOUT_S) -> int:
+    """Ask the sim-dobot process for a fresh scene; returns its seed once the new scene is live."""
+    payload = b"" if seed is None else json.dumps({"seed": seed}).encode()
+    key = scene_reset_key(cell_id)
+
+    def ask() -> int:
+        replies = bus.session.get(key, payload=payload, timeout=timeout_s)
+        for reply in replies:
+            if reply.ok is not None:
+                return int(json.loads(reply.ok.payload.to_bytes().decode())["seed"])
+            raise RobotCommunicationError(f"scene reset on {key} refused: {reply.err.payload.to_bytes().decode()}")
+        raise RobotCommunicationError(f"no simulated cell answered a scene reset on {key} within {timeout_s} s")
+
+    return await asyncio.to_thread(ask)

@@ -1,0 +1,180 @@
+"""The simulated Dobot's sockets: dashboard (29999), feedback (30004, 8 ms) and
+slow feedback (30005, 200 ms) on loopback, around a :class:`SimController`.
+
+A clock thread ticks the controller in sim time (``speed`` × real time, or as
+fast as possible with ``speed=0``) and hands every feedback packet to the event
+loop, which writes it whole to each connected client.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import threading
+import time
+
+from services.robot.protocol import CommandFramer
+from services.sim.controller import SimController
+
+log = logging.getLogger("pickplace.sim.server")
+
+MAX_BACKLOG_BYTES = 1440 * 256  # drop packets for a client that stops reading
+
+
+class SimDobotServer:
+    def __init__(
+        self,
+        controller: SimController,
+        host: str = "127.0.0.1",
+        dashboard_port: int = 29999,
+        feedback_port: int = 30004,
+        slow_feedback_port: int | None = 30005,
+        period_s: float = 0.008,
+        slow_period_s: float = 0.2,
+        speed: float = 1.0,
+    ):
+        self.controller = controller
+        self.host = host
+        self._ports = {"dashboard": dashboard_port, "feedback": feedback_port, "slow": slow_feedback_port}
+        self.period_s = period_s
+        self.slow_every = max(1, round(slow_period_s / period_s))
+        self.speed = speed
+        self.lock = threading.RLock()  # guards the controller (clock thread vs. dashboard)
+        self._servers: dict[str, asyncio.base_events.Server] = {}
+        self._fast: set[asyncio.StreamWriter] = set()
+        self._slow: set[asyncio.StreamWriter] = set()
+        self._dash: set[asyncio.StreamWriter] = set()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self.ticks = 0
+        self.ports: dict[str, int] = {}
+
+    async def __aenter__(self) -> SimDobotServer:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.stop()
+
+    async def start(self) -> None:
+        if self._loop is not None:
+            raise RuntimeError("server already started")
+        self._loop = asyncio.get_running_loop()
+        self._servers["dashboard"] = await asyncio.start_server(
+            self._serve_dashboard, self.host, self._ports["dashboard"]
+        )
+        self._servers["feedback"] = await asyncio.start_server(
+            self._make_feed_handler(self._fast), self.host, self._ports["feedback"]
+        )
+        if self._ports["slow"] is not None:
+            self._servers["slow"] = await asyncio.start_server(
+                self._make_feed_handler(self._slow), self.host, self._ports["slow"]
+            )
+        self.ports = {k: s.sockets[0].getsockname()[1] for k, s in self._servers.items()}
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._clock, name="sim-dobot-clock", daemon=True)
+        self._thread.start()
+        log.info("simulated Dobot listening on %s: %s", self.host, self.ports)
+
+    async def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            await asyncio.to_thread(self._thread.join, 2.0)
+            self._thread = None
+        for srv in self._servers.values():
+            srv.close()
+        self.drop_clients()
+        for srv in self._servers.values():
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(srv.wait_closed(), 2.0)
+        self._servers.clear()
+        self._loop = None
+        self.controller.engine.close()
+
+    def drop_clients(self) -> None:
+        """Close every client connection (as if the cable were pulled); listeners stay up."""
+        for group in (self._fast, self._slow, self._dash):
+            for w in list(group):
+                with contextlib.suppress(Exception):
+                    w.transport.abort()
+            group.clear()
+
+    # ------------------------------------------------------------------ clock thread
+    def _clock(self) -> None:
+        period = self.period_s
+        wall_period = period / self.speed if self.speed > 0 else 0.0
+        next_t = time.perf_counter()
+        while not self._stop.is_set():
+            with self.lock:
+                try:
+                    self.controller.tick(period)
+                except Exception:
+                    log.exception("controller tick failed")
+                packet = self.controller.feedback_bytes()
+            self.ticks += 1
+            slow = self.ticks % self.slow_every == 0
+            loop = self._loop
+            if loop is not None:
+                with contextlib.suppress(RuntimeError):
+                    loop.call_soon_threadsafe(self._broadcast, packet, slow)
+            if wall_period > 0:
+                next_t += wall_period
+                delay = next_t - time.perf_counter()
+                if delay > 0:
+                    self._stop.wait(delay)
+                elif delay < -0.25:  # far behind (debugger, overload): don't try to catch up
+                    next_t = time.perf_counter()
+            else:
+                time.sleep(0)
+
+    def _broadcast(self, packet: bytes, slow: bool) -> None:
+        groups = [self._fast, self._slow] if slow else [self._fast]
+        for group in groups:
+            for w in list(group):
+                if w.is_closing():
+                    group.discard(w)
+                    continue
+                if w.transport.get_write_buffer_size() > MAX_BACKLOG_BYTES:
+                    continue
+                w.write(packet)
+
+    # ------------------------------------------------------------------ sockets
+    def _make_feed_handler(self, group: set[asyncio.StreamWriter]):  # type: ignore[no-untyped-def]
+        async def handler(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+            group.add(writer)
+            try:
+                while await reader.read(1024):  # clients send nothing; wait for EOF
+                    pass
+            except (ConnectionError, asyncio.CancelledError):
+                pass
+            finally:
+                group.discard(writer)
+                with contextlib.suppress(Exception):
+                    writer.close()
+
+        return handler
+
+    async def _serve_dashboard(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        framer = CommandFramer()
+        self._dash.add(writer)
+        peer = writer.get_extra_info("peername")
+        log.debug("dashboard client %s connected", peer)
+        try:
+            while True:
+                data = await reader.read(4096)
+                if not data:
+                    break
+                for text in framer.feed(data):
+                    with self.lock:
+                        reply = self.controller.handle(text)
+                    writer.write(reply.encode())
+                await writer.drain()
+        except (ConnectionError, asyncio.CancelledError):
+            pass
+        finally:
+            self._dash.discard(writer)
+            with contextlib.suppress(Exception):
+                writer.close()
+            log.debug("dashboard client %s disconnected", peer)
