@@ -1,0 +1,269 @@
+"""The motion service: ``MotionPlanner`` over gRPC, a stateless shell over the planning cores.
+
+Every request carries its start state, scene and options; defaults come from
+``settings.motion``. Planning runs in a worker thread (one planner, hence one set of
+pinocchio data, per request), so the event loop stays responsive. Errors are raised as
+pickplace errors and translated to gRPC status codes by the common interceptor.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from typing import TypeVar
+
+import grpc
+import numpy as np
+from pickplace.v1 import motion_pb2, motion_pb2_grpc
+from prometheus_client import Counter, Histogram
+
+from services.common import grpc_util
+from services.common.errors import InvalidInputError
+from services.common.messages import pose_to_matrix
+from services.common.settings import MotionSettings, Settings
+from services.motion.collision import AttachedObject, Box, Scene
+from services.motion.kinematics import ArmModel, Kinematics, load_arm
+from services.motion.planner import MotionPlanner, Plan, PlannerConfig, Waypoint
+from services.motion.robot_models import ROBOTS
+from services.motion.trajectory import Array, JointTrajectory
+from services.motion.urdf import tool_geometry
+
+log = logging.getLogger("pickplace.motion.service")
+
+REQUESTS = Counter("pickplace_motion_requests_total", "Motion service requests", ["rpc", "outcome"])
+PLANNING_SECONDS = Histogram(
+    "pickplace_motion_planning_seconds",
+    "Wall time of a planning request",
+    ["rpc"],
+    buckets=(0.001, 0.003, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0),
+)
+
+T = TypeVar("T")
+
+
+# --- proto ↔ core ---------------------------------------------------------------------------------
+
+
+
+
+def _joints(values: object, name: str) -> Array:
+    arr = np.asarray(list(values), dtype=float)  # type: ignore[call-overload]
+    if arr.size == 0:
+        raise InvalidInputError(f"{name} is empty")
+    return arr
+
+
+
+
+def scene_from_proto(msg: motion_pb2.PlanningScene, motion: MotionSettings) -> Scene:
+    boxes = []
+    for k, b in enumerate(msg.boxes):
+        boxes.append(
+            Box.from_bounds(b.x_min, b.x_max, b.y_min, b.y_max, b.z_min, b.z_max, name=b.name or f"box{k}")
+        )
+    attached = None
+    if msg.HasField("attached"):
+        a = msg.attached
+        T_tool_object = (
+            pose_to_matrix(a.tool_to_object, "attached.tool_to_object")
+            if a.HasField("tool_to_object")
+            else np.eye(4)
+        )
+        shape = "box" if a.shape == motion_pb2.AttachedObject.BOX else "cylinder"
+        size = tuple(a.size) if shape == "box" else (0.05, 0.05, 0.05)
+        if shape == "box" and len(size) != 3:
+            raise InvalidInputError(f"attached box needs 3 sizes, got {list(a.size)}")
+        attached = AttachedObject(
+            shape=shape,
+            radius=a.radius or 0.011,
+            length=a.length or 0.2,
+            size=size,  # type: ignore[arg-type]
+            T_tool_object=tuple(map(tuple, T_tool_object)),
+        )  # type: ignore[arg-type]
+    table_z = None if msg.no_table else (msg.table_z if msg.HasField("table_z") else motion.table_z_m)
+    return Scene(
+        boxes=tuple(boxes),
+        table_z=table_z,
+        attached=attached,
+        padding_m=msg.padding if msg.HasField("padding") else motion.padding_m,
+        box_y_extension_m=msg.box_y_extension
+        if msg.HasField("box_y_extension")
+        else motion.box_y_extension_m,
+        allowed=frozenset((p.a, p.b) for p in msg.allowed),
+    )
+
+
+def config_from_options(opts: motion_pb2.MotionOptions, motion: MotionSettings) -> PlannerConfig:
+    base = PlannerConfig.from_settings(motion)
+    return PlannerConfig(
+        planner=opts.planner or base.planner,
+        time_budget_s=opts.planning_time_s or base.time_budget_s,
+        collision_resolution_rad=base.collision_resolution_rad,
+        velocity_scale=opts.velocity_scale or base.velocity_scale,
+        acceleration_scale=opts.acceleration_scale or base.acceleration_scale,
+        knot_period_s=opts.knot_period_s or base.knot_period_s,
+        cartesian_step_m=base.cartesian_step_m,
+        cartesian_step_rad=base.cartesian_step_rad,
+        jump_threshold_rad=base.jump_threshold_rad,
+        min_manipulability=base.min_manipulability,
+    )
+
+
+def plan_response(plan: Plan) -> motion_pb2.PlanResponse:
+    meta = plan.trajectory.meta
+    return motion_pb2.PlanResponse(
+        trajectory=plan.trajectory.to_proto(),
+        planner=plan.planner,
+        planning_time_s=plan.planning_time_s,
+        timing_time_s=plan.timing_time_s,
+        duration_s=plan.trajectory.duration,
+        path_points=int(plan.path.shape[0]),
+        notes=plan.notes,
+        velocity_ratio=float(meta.get("velocity_ratio", 0.0)),  # type: ignore[arg-type]
+        acceleration_ratio=float(meta.get("acceleration_ratio", 0.0)),  # type: ignore[arg-type]
+        jerk_ratio=float(meta.get("jerk_ratio", 0.0)),  # type: ignore[arg-type]
+    )
+
+
+# --- the servicer ---------------------------------------------------------------------------------
+class MotionPlannerServicer(motion_pb2_grpc.MotionPlannerServicer):
+    def __init__(self, settings: Settings):
+        self.settings = settings
+        self.motion = settings.motion
+        self.tool = tool_geometry(settings)
+
+    def _arm(self, model: str) -> ArmModel:
+        name = model or self.settings.robot.model
+        if name not in ROBOTS:
+            raise InvalidInputError(f"unknown robot model {name!r}; known: {sorted(ROBOTS)}")
+        return load_arm(name, self.tool)
+
+    def _planner(self, scene: motion_pb2.PlanningScene, opts: motion_pb2.MotionOptions) -> MotionPlanner:
+        return MotionPlanner(
+            self._arm(opts.robot_model),
+            scene_from_proto(scene, self.motion),
+            config_from_options(opts, self.motion),
+        )
+
+    async def _run(self, rpc: str, fn: Callable[[], T]) -> T:
+        return await grpc_util.run_metered(rpc, fn, REQUESTS, PLANNING_SECONDS)
+
+    async def SolveIK(
+        self, request: motion_pb2.SolveIKRequest, context: grpc.aio.ServicerContext
+    ) -> motion_pb2.SolveIKResponse:
+        def work() -> motion_pb2.SolveIKResponse:
+            kin = Kinematics(self._arm(request.robot_model))
+            T_ = pose_to_matrix(request.target, "target")
+            seed = _joints(request.seed, "seed") if len(request.seed) else np.zeros(kin.dof)
+            method = request.method or "auto"
+            sol = kin.solve_ik(T_, seed, method=method, min_manipulability=self.motion.min_manipulability)
+            others = []
+            if sol.method == "analytic":
+                others = [
+                    motion_pb2.IKSolution(positions=q.tolist(), manipulability=kin.manipulability(q))
+                    for q in kin.ik_analytic(T_, seed)
+                ]
+            return motion_pb2.SolveIKResponse(
+                best=motion_pb2.IKSolution(positions=sol.q.tolist(), manipulability=sol.manipulability),
+                solutions=others,
+                method=sol.method,
+                position_error=sol.position_error_m,
+                rotation_error=sol.rotation_error_rad,
+            )
+
+        return await self._run("SolveIK", work)
+
+    async def PlanJoints(
+        self, request: motion_pb2.PlanJointsRequest, context: grpc.aio.ServicerContext
+    ) -> motion_pb2.PlanResponse:
+        def work() -> motion_pb2.PlanResponse:
+            planner = self._planner(request.scene, request.options)
+            start = _joints(request.start, "start")
+            if len(request.goal):
+                plan = planner.plan_joints(
+                    start, _joints(request.goal, "goal"), shortest_angle=request.shortest_angle
+                )
+            elif request.HasField("goal_pose"):
+                plan = planner.plan_to_pose(start, pose_to_matrix(request.goal_pose, "goal_pose"))
+            else:
+                raise InvalidInputError("PlanJoints needs a joint goal or a goal_pose")
+            return plan_response(plan)
+
+        return await self._run("PlanJoints", work)
+
+    async def PlanCartesian(
+        self, request: motion_pb2.PlanCartesianRequest, context: grpc.aio.ServicerContext
+    ) -> motion_pb2.PlanResponse:
+        def work() -> motion_pb2.PlanResponse:
+            planner = self._planner(request.scene, request.options)
+            poses = [pose_to_matrix(p, f"poses[{k}]") for k, p in enumerate(request.poses)]
+            return plan_response(planner.plan_cartesian(_joints(request.start, "start"), poses))
+
+        return await self._run("PlanCartesian", work)
+
+    async def PlanWaypoints(
+        self, request: motion_pb2.PlanWaypointsRequest, context: grpc.aio.ServicerContext
+    ) -> motion_pb2.PlanResponse:
+        def work() -> motion_pb2.PlanResponse:
+            planner = self._planner(request.scene, request.options)
+            waypoints = []
+            for k, w in enumerate(request.waypoints):
+                motion = "linear" if w.motion == motion_pb2.MotionWaypoint.LINEAR else "joint"
+                if len(w.joints):
+                    waypoints.append(
+                        Waypoint(joints=_joints(w.joints, f"waypoints[{k}].joints"), motion=motion)
+                    )
+                elif w.HasField("pose"):
+                    waypoints.append(
+                        Waypoint(pose=pose_to_matrix(w.pose, f"waypoints[{k}].pose"), motion=motion)
+                    )
+                else:
+                    raise InvalidInputError(
+                        f"waypoint {k} ({w.label or 'unlabelled'}) has neither pose nor joints"
+                    )
+            return plan_response(planner.plan_waypoints(_joints(request.start, "start"), waypoints))
+
+        return await self._run("PlanWaypoints", work)
+
+    async def CheckTrajectory(
+        self, request: motion_pb2.CheckTrajectoryRequest, context: grpc.aio.ServicerContext
+    ) -> motion_pb2.CheckTrajectoryResponse:
+        def work() -> motion_pb2.CheckTrajectoryResponse:
+            planner = self._planner(request.scene, request.options)
+            traj = JointTrajectory.from_proto(request.trajectory)
+            result = planner.check_trajectory(traj, check_collisions=not request.skip_collisions)
+            rep = result.limits
+            return motion_pb2.CheckTrajectoryResponse(
+                ok=result.ok,
+                message=result.message,
+                velocity_ratio=rep.velocity_ratio if rep else 0.0,
+                acceleration_ratio=rep.acceleration_ratio if rep else 0.0,
+                jerk_ratio=rep.jerk_ratio if rep else 0.0,
+                collision_time_s=result.collision_time_s or 0.0,
+            )
+
+        return await self._run("CheckTrajectory", work)
+
+
+# --- server -------------------------------------------------------------------------------------
+def build_server(settings: Settings, port: int | None = None) -> tuple[grpc.aio.Server, int]:
+    """A MotionPlanner gRPC server bound to ``settings.grpc.host`` (not started); returns (server, port).
+
+    ``port``: None = ``settings.grpc.motion_port``; 0 = any free port.
+    """
+    server = grpc_util.create_server()
+    motion_pb2_grpc.add_MotionPlannerServicer_to_server(MotionPlannerServicer(settings), server)
+    bound = grpc_util.bind(server, settings.grpc.host, settings.grpc.motion_port if port is None else port)
+    return server, bound
+
+
+async def serve(settings: Settings) -> None:
+    """``pickplace serve motion``: run until cancelled."""
+    load_arm(settings.robot.model, tool_geometry(settings))  # fail fast on a bad model/tool
+    server, port = build_server(settings)
+    await server.start()
+    log.info("motion service serving MotionPlanner on %s:%d", settings.grpc.host, port)
+    try:
+        await server.wait_for_termination()
+    finally:
+        await server.stop(grace=0.5)

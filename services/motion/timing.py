@@ -1,0 +1,386 @@
+"""Time parameterisation of joint paths under velocity, acceleration and jerk limits.
+
+- A straight joint move (two configurations): ruckig, time-optimal and jerk-limited,
+  phase-synchronised so the joints stay on the straight line in joint space.
+- A multi-waypoint path: TOPP-RA (toppra) along a cubic spline through the
+  waypoints under velocity/acceleration limits; when jerk limits are given, a
+  1-D ruckig filter on the path parameter limits jerk without leaving the path.
+- ``rest_to_rest``: ruckig from waypoint to waypoint, stopping at each — exactly on
+  the polyline (used when a smooth blend must not leave the checked path).
+
+Every result passes :func:`services.motion.trajectory.verify_trajectory` before
+it is returned (a known weakness of MoveIt's time parameterisation is that
+nobody checks); limits are tightened and the step repeated when it does not.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Sequence
+
+import numpy as np
+import toppra
+import toppra.algorithm as ta_algo
+import toppra.constraint as ta_constraint
+from numpy.typing import ArrayLike
+from ruckig import InputParameter, OutputParameter, Result, Ruckig, RuckigError, Synchronization, Trajectory
+
+from services.common.errors import InvalidInputError, TrajectoryLimitError
+from services.motion.trajectory import Array, JointLimits, JointTrajectory, joint_path, verify_trajectory
+
+log = logging.getLogger("pickplace.motion.timing")
+# toppra logs its numerical failures at WARNING with its own handler (each line came out twice); a
+# failure is caught here and falls back to the next safety step or method, so keep its logger quiet
+logging.getLogger("toppra").setLevel(logging.ERROR)
+
+DEFAULT_DT = 0.01  # s between knots (the driver resamples at its ServoJ period)
+_SAFETY_STEPS = (0.97, 0.9, 0.8, 0.65)
+
+
+def time_grid(duration: float, dt: float) -> Array:
+    """Knot times 0, dt, 2dt, …, duration; the last interval is between dt/2 and 1.5 dt."""
+    if duration <= 0:
+        return np.zeros(1)
+    n = max(1, round(duration / dt))
+    ts = np.arange(n + 1) * dt
+    ts[-1] = duration
+    return ts
+
+
+def _ruckig_input(dof: int, limits: JointLimits, scale: float, dt: float) -> InputParameter:
+    inp = InputParameter(dof)
+    inp.max_velocity = (limits.max_velocity * scale).tolist()
+    inp.max_acceleration = (limits.max_acceleration * scale).tolist()
+    if limits.max_jerk is not None:
+        inp.max_jerk = (limits.max_jerk * scale).tolist()
+    else:
+        # no jerk limit: acceleration still ramps, within one knot period, so the knots (and the
+        # C2 interpolation between them) represent the motion exactly
+        inp.max_jerk = (limits.max_acceleration * scale / dt).tolist()
+    return inp
+
+
+def _switch_times(tr: Trajectory) -> Array:
+    """Times where some joint's jerk changes (phase boundaries of every DoF's profile)."""
+    out = []
+    for profile in tr.profiles[0]:
+        offset = float(profile.brake.duration) + float(profile.accel.duration)
+        out.append(offset + np.cumsum(np.asarray(profile.t, dtype=float)))
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+def _sample_ruckig(tr: Trajectory, joint_names: Sequence[str], dt: float) -> JointTrajectory:
+    """Knots every ``dt`` plus at every phase boundary: between boundaries the profile is an exact
+    cubic, which the quintic interpolation of :class:`JointTrajectory` reproduces exactly."""
+    duration = float(tr.duration)
+    grid = time_grid(duration, dt)
+    switches = _switch_times(tr)
+    switches = switches[(switches > 0) & (switches < duration)]
+    if switches.size:
+        # drop grid points crowding a boundary (tiny intervals are numerically poor)
+        near = np.min(np.abs(grid[:, None] - switches[None, :]), axis=1) < 0.1 * dt
+        near[[0, -1]] = False
+        grid = np.union1d(grid[~near], switches)
+        keep = np.concatenate([[True], np.diff(grid) > 1e-9])
+        grid = grid[keep]
+        grid[-1] = duration
+    rows = [tr.at_time(float(t)) for t in grid]
+    q = np.array([r[0] for r in rows])
+    qd = np.array([r[1] for r in rows])
+    qdd = np.array([r[2] for r in rows])
+    qd[-1] = 0.0
+    qdd[-1] = 0.0
+    return JointTrajectory(tuple(joint_names), grid, q, qd, qdd)
+
+
+def ruckig_move(
+    q_start: ArrayLike,
+    q_goal: ArrayLike,
+    limits: JointLimits,
+    joint_names: Sequence[str],
+    *,
+    dt: float = DEFAULT_DT,
+    scale: float = 1.0,
+) -> JointTrajectory:
+    """Rest-to-rest straight joint move, time-optimal under the (scaled) limits."""
+    dof = limits.dof
+    path = joint_path(np.vstack([np.ravel(q_start), np.ravel(q_goal)]), dof, "start/goal")
+    if np.max(np.abs(path[1] - path[0])) < 1e-12:
+        return JointTrajectory.hold(joint_names, path[0])
+    inp = _ruckig_input(dof, limits, scale, dt)
+    inp.current_position = path[0].tolist()
+    inp.current_velocity = [0.0] * dof
+    inp.current_acceleration = [0.0] * dof
+    inp.target_position = path[1].tolist()
+    inp.target_velocity = [0.0] * dof
+    inp.target_acceleration = [0.0] * dof
+    inp.synchronization = Synchronization.Phase
+    tr = Trajectory(dof)
+    try:
+        result = Ruckig(dof).calculate(inp, tr)
+    except RuckigError as exc:
+        raise TrajectoryLimitError(f"ruckig could not time the move {path[0]} → {path[1]}: {exc}") from exc
+    if result not in (Result.Working, Result.Finished):
+        raise TrajectoryLimitError(f"ruckig could not time the move {path[0]} → {path[1]}: {result}")
+    out = _sample_ruckig(tr, joint_names, dt)
+    out.positions[-1] = path[1]
+    return out
+
+
+def rest_to_rest(
+    path: ArrayLike,
+    limits: JointLimits,
+    joint_names: Sequence[str],
+    *,
+    dt: float = DEFAULT_DT,
+    scale: float = 1.0,
+) -> JointTrajectory:
+    """Straight ruckig moves between consecutive waypoints, at rest at each one."""
+    p = joint_path(path, limits.dof, "path")
+    traj = JointTrajectory.hold(joint_names, p[0])
+    for k in range(1, p.shape[0]):
+        if np.max(np.abs(p[k] - p[k - 1])) < 1e-12:
+            continue
+        traj = traj.append(ruckig_move(p[k - 1], p[k], limits, joint_names, dt=dt, scale=scale))
+    return traj
+
+
+def _dedupe(path: Array) -> Array:
+    keep = np.ones(path.shape[0], dtype=bool)
+    keep[1:] = np.max(np.abs(np.diff(path, axis=0)), axis=1) > 1e-9
+    return path[keep]
+
+
+def _toppra_profile(geometric: object, limits: JointLimits, scale: float, n_grid: int) -> tuple[Array, Array]:
+    """TOPP-RA's maximal path velocity ṡ at grid points of s ∈ [0, 1] under velocity/acceleration limits."""
+    vlim = limits.max_velocity * scale
+    alim = limits.max_acceleration * scale
+    constraints = [
+        ta_constraint.JointVelocityConstraint(np.column_stack([-vlim, vlim])),
+        ta_constraint.JointAccelerationConstraint(np.column_stack([-alim, alim])),
+    ]
+    grid = np.linspace(0.0, 1.0, n_grid)
+    instance = ta_algo.TOPPRA(constraints, geometric, gridpoints=grid)
+    result = instance.compute_parameterization(0.0, 0.0)
+    sd = np.asarray(result[1], dtype=float)
+    if sd.shape != grid.shape or not np.all(np.isfinite(sd)):
+        raise TrajectoryLimitError("TOPP-RA found no feasible timing for the path")
+    return grid, np.maximum(sd, 0.0)
+
+
+class _ConstAccelProfile:
+    """s(t) with piecewise-constant path acceleration between TOPP-RA grid points."""
+
+    def __init__(self, grid: Array, sd: Array):
+        ds = np.diff(grid)
+        vsum = sd[:-1] + sd[1:]
+        if np.any(vsum <= 0):
+            raise TrajectoryLimitError("TOPP-RA profile stalls (zero path velocity inside the path)")
+        self.dt = 2.0 * ds / vsum
+        self.t = np.concatenate([[0.0], np.cumsum(self.dt)])
+        self.s0, self.sd0 = grid[:-1], sd[:-1]
+        self.sdd = (sd[1:] ** 2 - sd[:-1] ** 2) / (2.0 * ds)
+        self.duration = float(self.t[-1])
+
+    def __call__(self, t: Array) -> tuple[Array, Array, Array]:
+        k = np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, self.dt.size - 1)
+        tau = np.clip(t - self.t[k], 0.0, self.dt[k])
+        return (
+            self.s0[k] + self.sd0[k] * tau + 0.5 * self.sdd[k] * tau**2,
+            self.sd0[k] + self.sdd[k] * tau,
+            self.sdd[k],
+        )
+
+
+def _smooth_profile(
+    profile: _ConstAccelProfile, jerk_s: float, dt: float
+) -> tuple[Array, Array, Array, Array]:
+    """Follow s(t) with a 1-D ruckig filter of path jerk ``jerk_s``.
+
+    The motion stays exactly on the path (only its timing lags the reference) and
+    ends at s = 1 at rest. Returns (t, s, ṡ, s̈) every ``dt``.
+    """
+    vmax = max(float(np.max(profile.sd0)), 1e-6)
+    amax = max(float(np.max(np.abs(profile.sdd))), 1e-6)
+    otg = Ruckig(1, dt)
+    inp = InputParameter(1)
+    out = OutputParameter(1)
+    inp.max_velocity, inp.max_acceleration, inp.max_jerk = [vmax], [amax], [jerk_s]
+    inp.current_position, inp.current_velocity, inp.current_acceleration = [0.0], [0.0], [0.0]
+    ts = np.arange(1, math.ceil(profile.duration / dt) + 1) * dt
+    s_ref, sd_ref, sdd_ref = profile(ts)
+    rows = [(0.0, 0.0, 0.0, 0.0)]
+    max_steps = ts.size + int(30.0 / dt)
+    for step in range(1, max_steps + 1):
+        if step >= ts.size:
+            inp.target_position, inp.target_velocity, inp.target_acceleration = [1.0], [0.0], [0.0]
+        else:
+            k = step - 1
+            v = min(float(sd_ref[k]), 0.99 * vmax)
+            # under a jerk limit a state (v, a) implies a speed of |v| + a²/2j just before or after
+            # it; ruckig rejects target states where that exceeds v_max
+            a_room = math.sqrt(2.0 * jerk_s * max(0.99 * vmax - abs(v), 0.0))
+            a = math.copysign(min(abs(float(sdd_ref[k])), a_room, amax), float(sdd_ref[k]))
+            inp.target_position, inp.target_velocity, inp.target_acceleration = [float(s_ref[k])], [v], [a]
+        try:
+            result = otg.update(inp, out)
+        except RuckigError as exc:
+            raise TrajectoryLimitError(
+                f"jerk-limited path timing failed at t = {step * dt:.3f} s: {exc}"
+            ) from exc
+        out.pass_to_input(inp)
+        rows.append((step * dt, out.new_position[0], out.new_velocity[0], out.new_acceleration[0]))
+        if step >= ts.size and result == Result.Finished:
+            break
+    else:
+        raise TrajectoryLimitError("jerk-limited path timing did not reach the end of the path")
+    arr = np.array(rows)
+    arr[-1, 1:] = (1.0, 0.0, 0.0)
+    return arr[:, 0], np.clip(arr[:, 1], 0.0, 1.0), arr[:, 2], arr[:, 3]
+
+
+def toppra_path(
+    path: ArrayLike,
+    limits: JointLimits,
+    joint_names: Sequence[str],
+    *,
+    dt: float = DEFAULT_DT,
+    scale: float = 1.0,
+) -> JointTrajectory:
+    """Near time-optimal timing along a cubic spline through ``path`` (TOPP-RA), jerk-limited when the
+    limits carry jerk.
+
+    The spline's parameter is the normalised chord length, so it passes through
+    every waypoint; the caller checks the spline for collisions. Jerk: TOPP-RA's
+    bang-bang path acceleration is followed by a 1-D ruckig filter on the path
+    parameter (the motion stays exactly on the spline, only its timing changes);
+    whatever still exceeds a limit is then removed by slowing the whole motion
+    uniformly (velocity ∝ 1/k, acceleration ∝ 1/k², jerk ∝ 1/k³).
+    """
+    p = _dedupe(joint_path(path, limits.dof, "path"))
+    if p.shape[0] == 1:
+        return JointTrajectory.hold(joint_names, p[0])
+    if p.shape[0] == 2:
+        return ruckig_move(p[0], p[1], limits, joint_names, dt=dt, scale=scale)
+    chord = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+    geometric = toppra.SplineInterpolator(chord / chord[-1], p, bc_type="clamped")
+    grid, sd = _toppra_profile(geometric, limits, scale, min(1000, max(100, 25 * p.shape[0])))
+    profile = _ConstAccelProfile(grid, sd)
+    if limits.max_jerk is None:
+        ts = time_grid(profile.duration, dt)
+        s, s_d, s_dd = profile(ts)
+        s_dd = np.asarray(s_dd) * np.ones_like(ts)
+    else:
+        dense = np.linspace(0.0, 1.0, 400)
+        dq = np.max(np.abs(np.asarray(geometric(dense, 1))), axis=0)
+        jerk_s = float(np.min(limits.max_jerk * scale / np.maximum(dq, 1e-9)))
+        ts, s, s_d, s_dd = _smooth_profile(profile, jerk_s, dt)
+    q = np.asarray(geometric(s))
+    q1 = np.asarray(geometric(s, 1))
+    q2 = np.asarray(geometric(s, 2))
+    qd = q1 * s_d[:, None]
+    qdd = q2 * (s_d**2)[:, None] + q1 * s_dd[:, None]
+    q[0], q[-1] = p[0], p[-1]
+    qd[0] = qd[-1] = 0.0
+    qdd[0] = qdd[-1] = 0.0
+    traj = JointTrajectory(tuple(joint_names), ts, q, qd, qdd)
+    k = _slowdown_factor(traj, limits, scale)
+    return traj.scaled(k) if k > 1.0 else traj
+
+
+def _slowdown_factor(traj: JointTrajectory, limits: JointLimits, scale: float) -> float:
+    """Uniform time-scale factor that brings knot velocity, acceleration and mean jerk within limits."""
+    v = float(np.max(np.abs(traj.velocities) / (limits.max_velocity * scale)))
+    a = float(np.max(np.abs(traj.accelerations) / (limits.max_acceleration * scale)))
+    k = max(1.0, v, math.sqrt(a))
+    if limits.max_jerk is not None and len(traj) > 1:
+        jerk = np.abs(np.diff(traj.accelerations, axis=0) / np.diff(traj.times)[:, None])
+        # mean jerk over a knot interval scales as 1/k³ (the interval grows by k as well)
+        k = max(k, float(np.max(jerk / (limits.max_jerk * scale))) ** (1.0 / 3.0))
+    return k
+
+
+def time_parameterize(
+    path: ArrayLike,
+    limits: JointLimits,
+    joint_names: Sequence[str],
+    *,
+    dt: float = DEFAULT_DT,
+    method: str = "auto",
+) -> JointTrajectory:
+    """Time a joint path at rest at both ends and verify the result against ``limits``.
+
+    ``method``:
+    - ``toppra``: TOPP-RA along a cubic spline through the waypoints (jerk-filtered
+      when the limits carry jerk);
+    - ``rest_to_rest``: jerk-limited straight moves stopping at each waypoint;
+    - ``auto``: a single move → ruckig; without jerk limits → ``toppra`` (``rest_to_rest``
+      if the spline cannot be timed within limits, e.g. it overshoots a position limit);
+      with jerk limits → the faster of the two (the jerk filter slows TOPP-RA's profile,
+      so stopping at a few waypoints can win).
+
+    ``meta["method"]`` names the one used; ``meta["on_polyline"]`` is 1.0 when the motion
+    stays on the straight segments between waypoints (else it follows the spline and
+    the caller must check that curve). Raises TrajectoryLimitError when no tightened
+    retry passes verification.
+    """
+    if len(joint_names) != limits.dof:
+        raise InvalidInputError(f"{len(joint_names)} joint names for {limits.dof} joint limits")
+    if not (math.isfinite(dt) and 1e-4 <= dt <= 0.1):
+        raise InvalidInputError(f"knot period dt must be within [0.0001, 0.1] s, got {dt}")
+    if method not in ("auto", "toppra", "rest_to_rest"):
+        raise InvalidInputError(f"unknown timing method {method!r} (auto, toppra, rest_to_rest)")
+    p = _dedupe(joint_path(path, limits.dof, "path"))
+    for k in range(p.shape[0]):
+        limits.check_positions(p[k], f"path point {k}")
+    if p.shape[0] <= 2:
+        methods = ["rest_to_rest"]
+    elif method == "auto":
+        methods = ["toppra", "rest_to_rest"]
+    else:
+        methods = [method]
+    best: JointTrajectory | None = None
+    errors: list[str] = []
+    for name in methods:
+        if best is not None and name == "rest_to_rest" and limits.max_jerk is None:
+            break  # without jerk limits TOPP-RA's timing is the faster one: no need to compare
+        try:
+            traj = _timed_verified(p, limits, joint_names, dt, name)
+        except TrajectoryLimitError as exc:
+            errors.append(f"{name}: {exc}")
+            continue
+        if best is None or traj.duration < best.duration:
+            best = traj
+    if best is None:
+        raise TrajectoryLimitError(
+            f"no timing of the {p.shape[0]}-point path passes the limit check: {errors}"
+        )
+    return best
+
+
+def _timed_verified(
+    p: Array, limits: JointLimits, joint_names: Sequence[str], dt: float, method: str
+) -> JointTrajectory:
+    last_error: TrajectoryLimitError | None = None
+    for scale in _SAFETY_STEPS:
+        try:
+            if method == "rest_to_rest":
+                traj = rest_to_rest(p, limits, joint_names, dt=dt, scale=scale)
+            else:
+                traj = toppra_path(p, limits, joint_names, dt=dt, scale=scale)
+            report = verify_trajectory(traj, limits, start=p[0], goal=p[-1])
+        except TrajectoryLimitError as exc:
+            log.debug("%s timing at %.0f %% of the limits failed: %s", method, scale * 100, exc)
+            last_error = exc
+            continue
+        traj.meta.update(
+            method=method,
+            on_polyline=1.0 if (method == "rest_to_rest" or p.shape[0] <= 2) else 0.0,
+            limit_scale=scale,
+            velocity_ratio=report.velocity_ratio,
+            acceleration_ratio=report.acceleration_ratio,
+            jerk_ratio=report.jerk_ratio,
+        )
+        return traj
+    raise TrajectoryLimitError(str(last_error))
