@@ -1,0 +1,184 @@
+"""The whole cell in one process (``pickplace up``, end-to-end tests, ``pickplace eval``).
+
+Every service runs as it would alone — its own gRPC server on loopback, Zenoh on
+loopback, the robot driver talking Dobot TCP to the simulated controller — so a
+cycle crosses the same transports as in the multi-process deployment. Ports given
+as 0 are chosen free and written back into the settings the task's clients use.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from typing import Any
+
+import grpc
+import numpy as np
+
+from services.common.bus import Bus
+from services.common.settings import Settings
+from services.robot.service import RobotService
+from services.sim.app import build_sim_server
+from services.sim.dobot_server import SimDobotServer
+from services.task.service import TaskService
+from services.vision.service import VisionService
+
+log = logging.getLogger("pickplace.cell")
+
+
+def with_updates(settings: Settings, **sections: dict[str, Any]) -> Settings:
+    """A copy of the settings with some fields of some sections replaced (validated types kept)."""
+    update = {name: getattr(settings, name).model_copy(update=values) for name, values in sections.items()}
+    return settings.model_copy(update=update)
+
+
+class Cell:
+    def __init__(self, settings: Settings, engine: str = "twin", seed: int | None = None,
+                 perfect_calibration: bool = False, calibration_error: tuple[float, float] | None = None):
+        self.settings = settings
+        self.engine_name = engine
+        self.seed = settings.sim.seed if seed is None else seed
+        self.perfect_calibration = perfect_calibration
+        self.calibration_error = calibration_error  # (metres, degrees) injected into T_base_camera
+        self.sim: SimDobotServer | None = None
+        self.bus: Bus | None = None
+        self.robot: RobotService | None = None
+        self.vision: VisionService | None = None
+        self.task: TaskService | None = None
+        self._servers: list[grpc.aio.Server] = []
+        self._stack = contextlib.AsyncExitStack()
+
+    # ------------------------------------------------------------------ lifecycle
+    async def __aenter__(self) -> Cell:
+        try:
+            await self._start()
+        except BaseException:
+            await self._stack.aclose()
+            raise
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self._stack.aclose()
+
+    async def _start(self) -> None:
+        from services.grasp.service import build_server as build_grasp
+        from services.motion.service import build_server as build_motion
+
+        s = with_updates(self.settings, sim={"seed": self.seed, "engine": self.engine_name})
+        self.sim = build_sim_server(s, self.engine_name)
+        await self._stack.enter_async_context(self.sim)
+        s = with_updates(s, robot={"dashboard_port": self.sim.ports["dashboard"],
+                                   "feedback_port": self.sim.ports["feedback"]})
+        self.bus = Bus(s.zenoh)
+        await self._stack.enter_async_context(self.bus)
+        self.robot = RobotService(s, self.bus)
+        await self._stack.enter_async_context(self.robot)
+        await self.robot.driver.enable()
+        motion_server, motion_port = build_motion(s, s.grpc.motion_port)
+        grasp_server, grasp_port = build_grasp(s, s.grpc.grasp_port)
+        for server in (motion_server, grasp_server):
+            await server.start()
+            self._servers.append(server)
+        self._stack.push_async_callback(self._stop_servers)
+        camera = self._camera()
+        self._stack.push_async_callback(self._close_camera)  # after the vision service has stopped
+        self.vision = VisionService(s, self.bus, camera=camera, T_base_camera=self._calibration(s),
+                                    publish_loop=True)
+        await self._stack.enter_async_context(self.vision)
+        s = with_updates(s, grpc={"robot_port": self.robot.grpc_port, "motion_port": motion_port,
+                                  "grasp_port": grasp_port, "vision_port": self.vision.grpc_port})
+        self.task = TaskService(s, self.bus)
+        await self._stack.enter_async_context(self.task)
+        s = with_updates(s, grpc={"task_port": self.task.grpc_port})
+        self.task.runner.between_cycles = self.next_scene if s.task.reset_scene_each_cycle else None
+        self.settings = s
+        log.info("cell up: sim %s, grpc robot %d motion %d grasp %d vision %d task %d", self.sim.ports,
+                 self.robot.grpc_port, motion_port, grasp_port, self.vision.grpc_port, self.task.grpc_port)
+
+    async def _close_camera(self) -> None:
+        cam = self.vision.camera if self.vision is not None else None
+        if cam is not None:
+            await asyncio.to_thread(cam.close)
+
+    async def _stop_servers(self) -> None:
+        for server in self._servers:
+            await server.stop(grace=0.2)
+
+    # ------------------------------------------------------------------ twin specifics
+    @property
+    def engine(self):  # type: ignore[no-untyped-def]
+        assert self.sim is not None
+        return self.sim.controller.engine
+
+    def _camera(self):  # type: ignore[no-untyped-def]
+        if self.engine_name != "twin":
+            return None
+        from services.sim.twin.camera import TwinCamera
+
+        return TwinCamera(self.engine, seed=self.seed)
+
+    def _calibration(self, s: Settings) -> np.ndarray | None:
+        """None = the vision service loads its calibration file (the default). The twin's true
+        camera pose is used only when asked for (evaluation), optionally with an injected error."""
+        if not self.perfect_calibration or self.engine_name != "twin":
+            return None
+        from scipy.spatial.transform import Rotation
+
+        from services.sim.twin.ground_truth import T_base_camera
+
+        T = T_base_camera(s.sim.twin.camera)
+        if self.calibration_error:
+            err_m, err_deg = self.calibration_error
+            rng = np.random.default_rng(self.seed + 7919)
+            d = rng.normal(size=3)
+            ax = rng.normal(size=3)
+            T = T.copy()
+            T[:3, 3] += err_m * d / np.linalg.norm(d)
+            T[:3, :3] = Rotation.from_rotvec(np.deg2rad(err_deg) * ax / np.linalg.norm(ax)).as_matrix() @ T[:3, :3]
+        return T
+
+    async def reset_scene(self, seed: int) -> None:
+        """A fresh seeded scene (new rod pose, cube layout) with the arm where it is now."""
+        from services.sim.twin import create_twin_engine
+        from services.sim.twin.camera import TwinCamera
+
+        assert self.sim is not None and self.vision is not None
+        s = with_updates(self.settings, sim={"seed": seed})
+        new = await asyncio.to_thread(create_twin_engine, s, seed)
+        with self.sim.lock:
+            ctrl = self.sim.controller
+            old = ctrl.engine
+            new.reset(ctrl.measured.q)
+            new.set_digital_outputs(ctrl.do_mask | (ctrl.tool_do_mask << 32))
+            ctrl.engine = new
+        self.seed = seed
+        old_cam = self.vision.camera
+        self.vision.camera = TwinCamera(new, seed=seed)
+        if old_cam is not None:
+            await asyncio.to_thread(old_cam.close)
+        await asyncio.to_thread(old.close)
+
+    async def settle(self, sim_seconds: float) -> None:
+        """Wait ``sim_seconds`` of simulated time (counted in controller feedback packets)."""
+        assert self.robot is not None and self.sim is not None
+        client = self.robot.driver.client
+        done = asyncio.Event()
+        need = max(1, round(sim_seconds / self.sim.period_s))
+        count = 0
+
+        def tick(_fb: object) -> None:
+            nonlocal count
+            count += 1
+            if count >= need:
+                done.set()
+
+        client.add_listener(tick)  # type: ignore[arg-type]
+        try:
+            async with asyncio.timeout(60.0 + 10 * sim_seconds):
+                await done.wait()
+        finally:
+            client.remove_listener(tick)  # type: ignore[arg-type]
+
+    async def next_scene(self) -> None:
+        await self.reset_scene(self.seed + 1)

@@ -1,0 +1,95 @@
+"""Small geometry shared by the grasp cores: tool frames, the gripper's outline, carried cylinders.
+
+Tool frame: z = approach (out of the flange), y = closing direction of the jaws, x = y × z.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy.spatial.transform import Rotation, Slerp
+
+from services.common.errors import InvalidInputError
+from services.common.frames import finite_vector
+from services.common.settings import GraspGripperSettings
+
+Array = np.ndarray
+
+UP = np.array([0.0, 0.0, 1.0])
+
+
+def unit(v: ArrayLike, name: str) -> Array:
+    a = finite_vector(v, 3, name)
+    n = float(np.linalg.norm(a))
+    if n < 1e-9:
+        raise InvalidInputError(f"{name} must be a non-zero vector, got {a.tolist()}")
+    return a / n
+
+
+def tool_rotation(approach: ArrayLike, closing: ArrayLike) -> Array:
+    """Rotation base←tool with tool z = approach and tool y = closing (made orthogonal to it)."""
+    z = np.asarray(approach, dtype=float)
+    z = z / np.linalg.norm(z)
+    y = np.asarray(closing, dtype=float)
+    y = y - (y @ z) * z
+    ny = np.linalg.norm(y)
+    if ny < 1e-9:
+        raise InvalidInputError("the closing direction must not be parallel to the approach")
+    y = y / ny
+    return np.column_stack([np.cross(y, z), y, z])
+
+
+def pose(R: Array, p: ArrayLike) -> Array:
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = p
+    return T
+
+
+def gripper_outline_tool(g: GraspGripperSettings, opening_m: float) -> Array:
+    """Corners (16, 3) of the two finger boxes and the palm box in the tool frame, jaws at ``opening_m``."""
+    half_open = opening_m / 2
+    tip = g.fingertip_beyond_tcp_m
+    top = tip - g.finger_length_m  # palm bottom (negative: toward the flange)
+    xs = (-g.pad_length_m / 2, g.pad_length_m / 2)
+    ys = (-(half_open + g.finger_thickness_m), half_open + g.finger_thickness_m)
+    fingers = np.array([[x, y, z] for x in xs for y in ys for z in (top, tip)])
+    px, py = g.palm_half_xy_m
+    palm = np.array([[x, y, z] for x in (-px, px) for y in (-py, py) for z in (top - g.palm_height_m, top)])
+    return np.vstack([fingers, palm])
+
+
+def lowest_gripper_z(g: GraspGripperSettings, T_base_tool: Array, opening_m: float) -> Array:
+    """Lowest point (base z) of the gripper outline for one pose (4, 4) or a batch (..., 4, 4)."""
+    pts = gripper_outline_tool(g, opening_m)
+    T = np.asarray(T_base_tool, dtype=float)
+    z = np.einsum("...j,kj->...k", T[..., 2, :3], pts) + T[..., 2, 3][..., None]
+    return z.min(axis=-1)
+
+
+def cylinder_lowest_z(center: Array, axis: Array, radius: float, length: float) -> Array:
+    """Lowest point (z) of solid cylinders with centres (..., 3) and unit axes (..., 3)."""
+    c = np.asarray(center, dtype=float)
+    u = np.asarray(axis, dtype=float)
+    uz = u[..., 2]
+    rim = radius * np.sqrt(np.clip(1.0 - uz * uz, 0.0, 1.0))
+    return c[..., 2] - (length / 2) * np.abs(uz) - rim
+
+
+def rotation_z(angle: float) -> Array:
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def pose_path(T_a: Array, T_b: Array, step_m: float, n: int | None = None) -> Array:
+    """Tool poses (n + 1, 4, 4) on the straight line a → b (position lerp, orientation slerp), both ends
+    included; ``n`` steps, or as many as keep each step ≤ ``step_m``."""
+    d = float(np.linalg.norm(T_b[:3, 3] - T_a[:3, 3]))
+    n = n or max(1, math.ceil(d / step_m))
+    s = np.linspace(0.0, 1.0, n + 1)
+    out = np.repeat(T_a[None], n + 1, axis=0)
+    out[:, :3, 3] = T_a[:3, 3] + s[:, None] * (T_b[:3, 3] - T_a[:3, 3])
+    out[:, :3, :3] = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([T_a[:3, :3], T_b[:3, :3]])))(s).as_matrix()
+    return out

@@ -1,0 +1,172 @@
+"""The grasp service: ``GraspPlanner`` over gRPC, a stateless shell over the grasp cores.
+
+Each request carries the object, the arm's current joints and the obstacle boxes; defaults come
+from ``settings.grasp`` (and the rod / cube sizes from ``settings.vision``). Planning runs in a
+worker thread with its own collision checker (pinocchio data are per thread), so the event loop
+stays responsive. Errors are pickplace errors, translated to gRPC status codes by the common
+interceptor.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from typing import TypeVar
+
+import grpc
+import numpy as np
+from pickplace.v1 import grasp_pb2, grasp_pb2_grpc
+from prometheus_client import Counter, Histogram
+from pydantic import ValidationError
+
+from services.common import grpc_util
+from services.common.errors import ConfigurationError, InvalidInputError
+from services.common.messages import pose_to_matrix
+from services.common.settings import RodStandSettings, Settings
+from services.grasp.collision import MotionCollisionCheck, tool_geometry
+from services.grasp.convert import (
+    boxes_from_proto,
+    grasp_to_proto,
+    joints_or,
+    plan_to_proto,
+)
+from services.grasp.cube import CubeObservation, plan_pick_and_place
+from services.grasp.rod import RodObservation, plan_pick_and_stand
+from services.grasp.synthesis import ObjectSpec, compute_grasps
+from services.motion.robot_models import get_robot
+
+log = logging.getLogger("pickplace.grasp.service")
+
+REQUESTS = Counter("pickplace_grasp_requests_total", "Grasp service requests", ["rpc", "outcome"])
+PLANNING_SECONDS = Histogram(
+    "pickplace_grasp_planning_seconds", "Wall time of a grasp planning request", ["rpc"],
+    buckets=(0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0),
+)
+
+T = TypeVar("T")
+
+
+class GraspPlannerServicer(grasp_pb2_grpc.GraspPlannerServicer):
+    def __init__(self, settings: Settings):
+        self.settings = settings
+        self.cfg = settings.grasp
+        model = settings.robot.model
+        self.spec = get_robot(model)
+        self.T_flange_tool = tool_geometry(settings).T_flange_tool()
+        home_deg = self.cfg.safe_home_joints_deg.get(model)
+        if home_deg is None:
+            raise ConfigurationError(
+                f"grasp.safe_home_joints_deg has no entry for robot model {model!r} "
+                f"(has {sorted(self.cfg.safe_home_joints_deg)})"
+            )
+        self.home = np.radians(np.asarray(home_deg, dtype=float))
+        if not self.spec.within_limits(self.home):
+            raise ConfigurationError(f"grasp.safe_home_joints_deg[{model!r}] = {home_deg} is outside the joint limits")
+        self.stroke_m = settings.gripper.stroke_m
+
+    async def _run(self, rpc: str, fn: Callable[[], T]) -> T:
+        return await grpc_util.run_metered(rpc, fn, REQUESTS, PLANNING_SECONDS)
+
+    async def ComputeGrasps(
+        self, request: grasp_pb2.ComputeGraspsRequest, context: grpc.aio.ServicerContext
+    ) -> grasp_pb2.ComputeGraspsResponse:
+        def work() -> grasp_pb2.ComputeGraspsResponse:
+            obj = ObjectSpec.from_request(
+                request.object_shape,
+                pose_to_matrix(request.object_pose, "object_pose"),
+                request.object_width,
+                request.object_depth,
+                request.object_height,
+            )
+            seed = joints_or(request.current_joints, self.home, self.spec.dof, "current_joints")
+            check = MotionCollisionCheck.from_settings(self.settings, boxes_from_proto(request.obstacles))
+            result = compute_grasps(
+                obj, self.spec, self.T_flange_tool, seed, self.cfg, self.stroke_m,
+                collision_check=check,
+                num_candidates=request.num_candidates or None,
+                check_reach=not request.skip_reachability,
+            )
+            return grasp_pb2.ComputeGraspsResponse(
+                grasps=[grasp_to_proto(g) for g in result.grasps],
+                success=bool(result.grasps),
+                message=result.summary(),
+                candidates_generated=result.generated,
+                rejected=result.rejected,
+            )
+
+        return await self._run("ComputeGrasps", work)
+
+    async def PlanPickAndStand(
+        self, request: grasp_pb2.PickAndStandRequest, context: grpc.aio.ServicerContext
+    ) -> grasp_pb2.PickPlan:
+        def work() -> grasp_pb2.PickPlan:
+            t0 = time.perf_counter()
+            rod_cfg = self.settings.vision.rod
+            rod = RodObservation.create(
+                list(request.center), list(request.axis),
+                request.length or rod_cfg.length_m, request.diameter or rod_cfg.diameter_m,
+            )
+            q_now = joints_or(request.current_joints, self.home, self.spec.dof, "current_joints")
+            check = MotionCollisionCheck.from_settings(self.settings, boxes_from_proto(request.obstacles))
+            cfg = self.cfg
+            if request.HasField("grasp_offset"):
+                try:
+                    rod_cfg = RodStandSettings.model_validate(
+                        {**cfg.rod.model_dump(), "grasp_offset_m": request.grasp_offset}
+                    )
+                except ValidationError as exc:
+                    raise InvalidInputError(f"grasp_offset {request.grasp_offset} m: {exc.errors()[0]['msg']}") from exc
+                cfg = cfg.model_copy(update={"rod": rod_cfg})
+            plan = plan_pick_and_stand(
+                self.spec, rod, q_now, cfg, self.T_flange_tool, self.stroke_m,
+                q_home=self.home,
+                place_xy=list(request.place_xy) if len(request.place_xy) else None,
+                collision_check=check,
+                alternative=request.alternative,
+            )
+            return plan_to_proto(plan, time.perf_counter() - t0, time.time_ns())
+
+        return await self._run("PlanPickAndStand", work)
+
+    async def PlanPickAndPlace(
+        self, request: grasp_pb2.PickAndPlaceRequest, context: grpc.aio.ServicerContext
+    ) -> grasp_pb2.PickPlan:
+        def work() -> grasp_pb2.PickPlan:
+            t0 = time.perf_counter()
+            cube = CubeObservation.create(
+                pose_to_matrix(request.cube_pose, "cube_pose"),
+                request.size or self.settings.vision.cubes.cube_size_m,
+                request.color,
+            )
+            q_now = joints_or(request.current_joints, self.home, self.spec.dof, "current_joints")
+            check = MotionCollisionCheck.from_settings(self.settings, boxes_from_proto(request.obstacles))
+            plan = plan_pick_and_place(
+                self.spec, cube, q_now, self.cfg, self.T_flange_tool, self.stroke_m,
+                q_home=self.home, collision_check=check, alternative=request.alternative,
+            )
+            return plan_to_proto(plan, time.perf_counter() - t0, time.time_ns())
+
+        return await self._run("PlanPickAndPlace", work)
+
+
+def build_server(settings: Settings, port: int | None = None) -> tuple[grpc.aio.Server, int]:
+    """A GraspPlanner gRPC server bound to ``settings.grpc.host`` (not started); returns (server, port).
+
+    ``port``: None = ``settings.grpc.grasp_port``; 0 = any free port.
+    """
+    server = grpc_util.create_server()
+    grasp_pb2_grpc.add_GraspPlannerServicer_to_server(GraspPlannerServicer(settings), server)
+    bound = grpc_util.bind(server, settings.grpc.host, settings.grpc.grasp_port if port is None else port)
+    return server, bound
+
+
+async def serve(settings: Settings) -> None:
+    """``pickplace serve grasp``: run until cancelled."""
+    server, port = build_server(settings)
+    await server.start()
+    log.info("grasp service serving GraspPlanner on %s:%d", settings.grpc.host, port)
+    try:
+        await server.wait_for_termination()
+    finally:
+        await server.stop(grace=0.5)

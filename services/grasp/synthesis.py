@@ -1,0 +1,455 @@
+"""Antipodal grasp synthesis for boxes, cylinders and spheres (LLD §4.2), scored and filtered.
+
+Pipeline of :func:`compute_grasps`:
+
+1. **Candidates** in the object frame: pads on opposite faces (box), across the diameter or on
+   the flat ends (cylinder), through the centre (sphere); several approach directions, jaw
+   orientations (the two 180°-symmetric wrist options) and offsets along the free axis. Sampling
+   around a cylinder's axis is anchored to gravity, so a lying cylinder always gets the exact
+   top-down grasp.
+2. **Geometric filters** in the base frame: the object fits the stroke, no approach from below,
+   the fingers and palm stay above the table at the grasp and the pre-grasp.
+3. **Force closure**: each pad's contact is a line of point contacts (flat pad on a face or along a
+   cylinder) or a single soft-finger point (sphere); :mod:`force_closure` gives ε; grasps without
+   force closure are dropped.
+4. **Quality** in [0, 1]: 0.3 · the LLD width score (1 − |w/w_max − 0.5|·0.5) + 0.4 · ε relative to
+   the best ε of the request + 0.2 · top-down-ness of the approach + 0.1 · centring.
+5. **Reachability** (batched closed-form IK, one branch along the straight approach line) and an
+   optional **collision** check of the pre-grasp and grasp configurations; the survivors are
+   ranked by quality, then by joint motion from the seed.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from services.common.errors import InvalidInputError
+from services.common.frames import check_transform, invert_transform
+from services.common.settings import GraspGripperSettings, GraspSettings
+from services.grasp.force_closure import ContactModel, evaluate_force_closure
+from services.grasp.geometry import lowest_gripper_z, pose, pose_path, tool_rotation
+from services.grasp.plan import Grasp, HeldObject
+from services.grasp.reach import TrackLimits, track_paths
+from services.motion.robot_models import RobotSpec
+
+Array = np.ndarray
+
+SHAPES = ("box", "cylinder", "sphere")
+W_WIDTH, W_EPS, W_APPROACH, W_CENTER = 0.3, 0.4, 0.2, 0.1
+MAX_APPROACH_UP = 0.05  # tool z may point at most this much upward (z component): no grasps from below
+N_AROUND = 8  # samples around a cylinder's axis / closing directions per sphere approach
+N_ALONG = 5  # offsets along a free axis
+
+CollisionCheck = Callable[[Array, HeldObject | None], bool]
+
+
+@dataclass(frozen=True)
+class ObjectSpec:
+    """An object to grasp: shape, pose and size (LLD ComputeGrasps request).
+
+    ``dims``: box = sizes along object x, y, z; cylinder = (diameter, diameter, length along z);
+    sphere = (diameter, diameter, diameter).
+    """
+
+    shape: str
+    T_base_object: Array
+    dims: tuple[float, float, float]
+
+    @classmethod
+    def from_request(
+        cls, shape: str, T_base_object: ArrayLike, width: float, depth: float, height: float
+    ) -> ObjectSpec:
+        if shape not in SHAPES:
+            raise InvalidInputError(f"object shape must be one of {list(SHAPES)}, got {shape!r}")
+        T = check_transform(T_base_object, "object pose")
+        vals = {"width": width, "depth": depth, "height": height}
+        needed = {"box": ("width", "depth", "height"), "cylinder": ("width", "height"), "sphere": ("width",)}[shape]
+        for name in needed:
+            v = vals[name]
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 < v <= 2.0):
+                raise InvalidInputError(f"{shape} {name} must be within (0, 2] m, got {v!r}")
+        if shape == "box":
+            dims = (float(width), float(depth), float(height))
+        elif shape == "cylinder":
+            dims = (float(width), float(width), float(height))
+        else:
+            dims = (float(width),) * 3
+        return cls(shape, T, dims)
+
+    @property
+    def characteristic_length(self) -> float:
+        """Torque scale of the wrench space: the largest half-extent."""
+        return max(self.dims) / 2
+
+    def held(self, T_tool_object: Array) -> HeldObject:
+        if self.shape == "box":
+            return HeldObject("box", T_tool_object, size=self.dims)
+        if self.shape == "cylinder":
+            return HeldObject("cylinder", T_tool_object, radius=self.dims[0] / 2, length=self.dims[2])
+        # a sphere is carried as its bounding box (motion checks cylinders and boxes)
+        return HeldObject("box", T_tool_object, size=self.dims)
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A grasp in the object frame, before scoring."""
+
+    T_object_tool: Array
+    width: float
+    points: Array  # contacts (k, 3), object frame
+    normals: Array  # inward (k, 3)
+    centering: float
+    label: str
+
+
+@dataclass
+class GraspSet:
+    grasps: list[Grasp]
+    generated: int = 0
+    rejected: dict[str, int] = field(default_factory=dict)
+
+    def summary(self) -> str:
+        rej = ", ".join(f"{v} {k}" for k, v in self.rejected.items() if v) or "none"
+        return f"{len(self.grasps)} grasps from {self.generated} candidates (rejected: {rej})"
+
+
+# --- candidates (object frame) --------------------------------------------------------------------
+def _contact_line(a: Array, b: Array, n: int) -> Array:
+    if np.linalg.norm(b - a) < 1e-6:
+        return a[None]
+    return a[None] + np.linspace(0.0, 1.0, n)[:, None] * (b - a)[None]
+
+
+def _samples(half_range: float, n: int) -> Array:
+    return np.linspace(-half_range, half_range, n) if half_range > 1e-3 else np.zeros(1)
+
+
+def _pair(line_pos: Array, line_neg: Array, n_pos: Array, n_neg: Array) -> tuple[Array, Array]:
+    points = np.vstack([line_pos, line_neg])
+    normals = np.vstack([np.repeat(n_pos[None], len(line_pos), 0), np.repeat(n_neg[None], len(line_neg), 0)])
+    return points, normals
+
+
+def box_candidates(size: tuple[float, float, float], cfg: GraspSettings, stroke_m: float) -> list[Candidate]:
+    g, npl = cfg.gripper, cfg.force_closure.points_per_line
+    s = np.asarray(size, dtype=float)
+    eye = np.eye(3)
+    out: list[Candidate] = []
+    for i in range(3):
+        width = s[i]
+        if width + g.width_margin_m > stroke_m or width < g.min_width_m:
+            continue
+        for j in range(3):
+            if j == i:
+                continue
+            k = 3 - i - j
+            depth = min(s[j] / 2, cfg.max_grasp_depth_m)
+            for sigma in (1.0, -1.0):
+                tcp_j = sigma * (s[j] / 2 - depth)
+                lo_j, hi_j = max(tcp_j - g.pad_height_m / 2, -s[j] / 2), min(tcp_j + g.pad_height_m / 2, s[j] / 2)
+                for o in _samples(max(0.0, s[k] / 2 - g.pad_length_m / 2), N_ALONG):
+                    lo_k, hi_k = max(o - g.pad_length_m / 2, -s[k] / 2), min(o + g.pad_length_m / 2, s[k] / 2)
+                    if hi_j <= lo_j or hi_k <= lo_k:
+                        continue
+                    # the contact patch as a line along its longer side, through its middle
+                    a, b = np.zeros(3), np.zeros(3)
+                    if hi_k - lo_k >= hi_j - lo_j:
+                        a[k], b[k] = lo_k, hi_k
+                        a[j] = b[j] = (lo_j + hi_j) / 2
+                    else:
+                        a[j], b[j] = lo_j, hi_j
+                        a[k] = b[k] = (lo_k + hi_k) / 2
+                    line = _contact_line(a, b, npl)
+                    lp, ln = line.copy(), line.copy()
+                    lp[:, i], ln[:, i] = s[i] / 2, -s[i] / 2
+                    pts, nrm = _pair(lp, ln, -eye[i], eye[i])
+                    centering = float(np.clip(1 - 0.5 * abs(o) / (s[k] / 2) - 0.5 * abs(tcp_j) / (s[j] / 2), 0, 1))
+                    p = np.zeros(3)
+                    p[j], p[k] = tcp_j, o
+                    for tau in (1.0, -1.0):
+                        R = tool_rotation(-sigma * eye[j], tau * eye[i])
+                        label = (f"box: close {'xyz'[i]}, from {'+' if sigma > 0 else '-'}{'xyz'[j]}, offset {o:+.3f} m, "
+                                 f"jaw {'+' if tau > 0 else '-'}")
+                        out.append(Candidate(pose(R, p), float(width), pts, nrm, centering, label))
+    return out
+
+
+def _phi0(down_obj: Array) -> float:
+    """Angle about the object z axis whose side approach points most nearly down (gravity anchor)."""
+    d = down_obj[:2]
+    n = float(np.linalg.norm(d))
+    return math.atan2(d[0] / n, -d[1] / n) if n > 1e-6 else 0.0
+
+
+def cylinder_candidates(
+    radius: float, length: float, cfg: GraspSettings, stroke_m: float, down_obj: Array
+) -> list[Candidate]:
+    g, npl = cfg.gripper, cfg.force_closure.points_per_line
+    h2 = length / 2
+    ez = np.array([0.0, 0.0, 1.0])
+    out: list[Candidate] = []
+    width = 2 * radius
+    if width + g.width_margin_m <= stroke_m and width >= g.min_width_m:
+        phi0 = _phi0(down_obj)
+        for m in range(N_AROUND):
+            phi = phi0 + m * math.pi / N_AROUND
+            u = np.array([math.cos(phi), math.sin(phi), 0.0])
+            v = np.array([-math.sin(phi), math.cos(phi), 0.0])
+            # side approach, perpendicular to the axis: the pads lie along the axis
+            shift = max(0.0, radius - cfg.max_grasp_depth_m)
+            if shift <= g.pad_height_m / 2:
+                for t in _samples(max(0.0, h2 - g.pad_length_m / 2), N_ALONG):
+                    lo, hi = max(t - g.pad_length_m / 2, -h2), min(t + g.pad_length_m / 2, h2)
+                    line = _contact_line(lo * ez, hi * ez, npl)
+                    pts, nrm = _pair(line + radius * u, line - radius * u, -u, u)
+                    for sigma in (1.0, -1.0):
+                        p = t * ez + sigma * shift * v
+                        for tau in (1.0, -1.0):
+                            R = tool_rotation(-sigma * v, tau * u)
+                            label = (f"cylinder: side, {math.degrees(phi - phi0):.0f}° from top, offset {t:+.3f} m, "
+                                     f"jaw {'+' if tau > 0 else '-'}")
+                            out.append(Candidate(pose(R, p), width, pts, nrm, float(1 - abs(t) / h2), label))
+            # end approach, along the axis: the pads touch lines parallel to the axis
+            depth = min(h2, cfg.max_grasp_depth_m)
+            for sigma in (1.0, -1.0):
+                tz = sigma * (h2 - depth)
+                lo, hi = max(tz - g.pad_height_m / 2, -h2), min(tz + g.pad_height_m / 2, h2)
+                line = _contact_line(lo * ez, hi * ez, npl)
+                pts, nrm = _pair(line + radius * u, line - radius * u, -u, u)
+                for tau in (1.0, -1.0):
+                    R = tool_rotation(-sigma * ez, tau * u)
+                    label = f"cylinder: from the {'+' if sigma > 0 else '-'}z end, around {math.degrees(phi):.0f}°"
+                    out.append(Candidate(pose(R, tz * ez), width, pts, nrm, float(1 - abs(tz) / h2), label))
+    # grip on the flat ends (closing along the axis) when the cylinder is short enough
+    if length + g.width_margin_m <= stroke_m and length >= g.min_width_m:
+        depth = min(radius, cfg.max_grasp_depth_m)
+        for m in range(N_AROUND):
+            beta = m * 2 * math.pi / N_AROUND
+            w = np.array([math.cos(beta), math.sin(beta), 0.0])
+            w_perp = np.array([-math.sin(beta), math.cos(beta), 0.0])
+            tw = radius - depth
+            half_chord = math.sqrt(max(radius**2 - tw**2, 0.0))
+            x = min(g.pad_length_m / 2, half_chord)
+            line = _contact_line(tw * w - x * w_perp, tw * w + x * w_perp, npl)
+            pts, nrm = _pair(line + h2 * ez, line - h2 * ez, -ez, ez)
+            for tau in (1.0, -1.0):
+                R = tool_rotation(-w, tau * ez)
+                label = f"cylinder: ends, from {math.degrees(beta):.0f}°"
+                out.append(Candidate(pose(R, tw * w), length, pts, nrm, float(1 - tw / radius), label))
+    return out
+
+
+def _fibonacci_directions(n: int) -> Array:
+    k = np.arange(n) + 0.5
+    z = 1 - 2 * k / n
+    r = np.sqrt(1 - z * z)
+    phi = k * math.pi * (3 - math.sqrt(5))
+    return np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
+
+
+def sphere_candidates(radius: float, cfg: GraspSettings, stroke_m: float, down_obj: Array) -> list[Candidate]:
+    g = cfg.gripper
+    width = 2 * radius
+    if width + g.width_margin_m > stroke_m or width < g.min_width_m:
+        return []
+    shift = radius - min(radius, cfg.max_grasp_depth_m)
+    if shift > g.pad_height_m / 2:
+        return []
+    out: list[Candidate] = []
+    approaches = np.vstack([down_obj[None], _fibonacci_directions(16)])
+    for a in approaches:
+        helper = np.eye(3)[int(np.argmin(np.abs(a)))]
+        u0 = np.cross(a, helper)
+        u0 /= np.linalg.norm(u0)
+        u1 = np.cross(a, u0)
+        for m in range(N_AROUND // 2):
+            ang = m * math.pi / (N_AROUND // 2)
+            u = math.cos(ang) * u0 + math.sin(ang) * u1
+            pts, nrm = _pair((radius * u)[None], (-radius * u)[None], -u, u)
+            for tau in (1.0, -1.0):
+                R = tool_rotation(a, tau * u)
+                out.append(Candidate(pose(R, -shift * a), width, pts, nrm, 1.0, "sphere: through the centre"))
+    return out
+
+
+def candidates_for(obj: ObjectSpec, cfg: GraspSettings, stroke_m: float) -> list[Candidate]:
+    down_obj = obj.T_base_object[:3, :3].T @ np.array([0.0, 0.0, -1.0])
+    if obj.shape == "box":
+        return box_candidates(obj.dims, cfg, stroke_m)
+    if obj.shape == "cylinder":
+        return cylinder_candidates(obj.dims[0] / 2, obj.dims[2], cfg, stroke_m, down_obj)
+    return sphere_candidates(obj.dims[0] / 2, cfg, stroke_m, down_obj)
+
+
+# --- scoring --------------------------------------------------------------------------------------
+def width_quality(width_m: float, stroke_m: float) -> float:
+    """LLD §4.2: 1 − |w/w_max − 0.5|·0.5, and 0 when the object does not fit."""
+    if width_m > stroke_m:
+        return 0.0
+    return float(np.clip(1.0 - abs(width_m / stroke_m - 0.5) * 0.5, 0.0, 1.0))
+
+
+def contact_model(cfg: GraspSettings) -> ContactModel:
+    fc = cfg.force_closure
+    return ContactModel(fc.friction_coefficient, fc.cone_edges, fc.torsional_friction_m)
+
+
+def synthesize(obj: ObjectSpec, cfg: GraspSettings, stroke_m: float) -> GraspSet:
+    """Candidates → geometric filters → force closure → quality (no reachability yet)."""
+    g = cfg.gripper
+    cands = candidates_for(obj, cfg, stroke_m)
+    result = GraspSet([], generated=len(cands), rejected={"from below": 0, "table": 0, "no force closure": 0})
+    if not cands:
+        return result
+    T_obj = obj.T_base_object
+    T_tools = np.einsum("ij,njk->nik", T_obj, np.stack([c.T_object_tool for c in cands]))
+    approach = T_tools[:, :3, 2]
+    openings = np.array([min(stroke_m, c.width + g.width_margin_m) for c in cands])
+    floor = cfg.table_z_m + g.table_clearance_m
+    model = contact_model(cfg)
+    cache: dict[bytes, tuple[bool, float]] = {}
+    kept: list[tuple[Candidate, Array, float, bool]] = []
+    for n, c in enumerate(cands):
+        if approach[n, 2] > MAX_APPROACH_UP:
+            result.rejected["from below"] += 1
+            continue
+        T_n = _clear_table(c, T_tools[n], openings[n], floor, g)
+        if T_n is None:
+            result.rejected["table"] += 1
+            continue
+        T_pre_n = T_n.copy()
+        T_pre_n[:3, 3] -= cfg.approach_distance_m * approach[n]
+        if lowest_gripper_z(g, T_pre_n, openings[n]) < floor:
+            result.rejected["table"] += 1
+            continue
+        T_tools[n] = T_n
+        key = np.round(np.hstack([c.points, c.normals]), 6).tobytes()
+        if key not in cache:
+            fc = evaluate_force_closure(c.points, c.normals, model, obj.characteristic_length)
+            cache[key] = (fc.force_closure, fc.epsilon)
+        closure, eps = cache[key]
+        if not closure:
+            result.rejected["no force closure"] += 1
+            continue
+        kept.append((c, T_tools[n], eps, closure))
+    if not kept:
+        return result
+    eps_best = max(k[2] for k in kept)
+    for c, T, eps, closure in kept:
+        wq = width_quality(c.width, stroke_m)
+        top = (1.0 - T[2, 2]) / 2  # 1 when approaching straight down
+        q = W_WIDTH * wq + W_EPS * (eps / eps_best) + W_APPROACH * top + W_CENTER * c.centering
+        result.grasps.append(
+            Grasp(
+                T_base_tool=T,
+                width_m=c.width,
+                opening_m=min(stroke_m, c.width + g.width_margin_m),
+                quality=round(float(np.clip(q, 0.0, 1.0)), 6),
+                width_quality=wq,
+                epsilon=eps,
+                force_closure=closure,
+                approach_direction=T[:3, 2].copy(),
+                approach_distance_m=cfg.approach_distance_m,
+                force_n=g.grip_force_n,
+                contacts_base=(T_obj[:3, :3] @ c.points.T).T + T_obj[:3, 3],
+                label=c.label,
+            )
+        )
+    result.grasps.sort(key=lambda gr: -gr.quality)
+    return result
+
+
+def _clear_table(
+    c: Candidate, T_base_tool: Array, opening_m: float, floor_z: float, g: GraspGripperSettings
+) -> Array | None:
+    """The grasp pose, backed off along the approach until the gripper clears the table while the
+    pads still cover the contacts (a lying rod is grasped a millimetre above its axis); None if not."""
+    deficit = floor_z - float(lowest_gripper_z(g, T_base_tool, opening_m))
+    if deficit <= 0:
+        return T_base_tool
+    a_z = T_base_tool[2, 2]
+    if a_z > -0.1:
+        return None
+    shift = deficit / -a_z + 1e-6
+    T_tool_object = invert_transform(c.T_object_tool)
+    contact_z = c.points @ T_tool_object[2, :3] + T_tool_object[2, 3]  # along the approach, from the TCP
+    if np.any(np.abs(contact_z + shift) > g.pad_height_m / 2):
+        return None
+    T = T_base_tool.copy()
+    T[:3, 3] -= shift * T[:3, 2]
+    return T
+
+
+# --- reachability and collision -------------------------------------------------------------------
+def approach_path(T_grasp: Array, distance_m: float, step_m: float) -> Array:
+    """Tool poses (N, 4, 4) from the pre-grasp down the approach axis to the grasp."""
+    T_pre = T_grasp.copy()
+    T_pre[:3, 3] -= distance_m * T_grasp[:3, 2]
+    return pose_path(T_pre, T_grasp, step_m, max(1, math.ceil(distance_m / step_m - 1e-9)))
+
+
+def track_limits(cfg: GraspSettings) -> TrackLimits:
+    return TrackLimits(
+        jump_threshold_rad=math.radians(cfg.jump_threshold_deg),
+        min_singularity_sin=math.sin(math.radians(cfg.min_singularity_deg)),
+        arm_table_clearance_m=cfg.arm_table_clearance_m,
+        table_z_m=cfg.table_z_m,
+    )
+
+
+def filter_reachable(
+    grasps: list[Grasp],
+    spec: RobotSpec,
+    T_flange_tool: Array,
+    seed: Array,
+    cfg: GraspSettings,
+    collision_check: CollisionCheck | None = None,
+    rejected: dict[str, int] | None = None,
+) -> list[Grasp]:
+    """Grasps whose approach line the arm follows in one IK branch (and collision-free), with joints."""
+    if not grasps:
+        return []
+    T_tool_flange = invert_transform(T_flange_tool)
+    paths = np.stack([approach_path(gr.T_base_tool, cfg.approach_distance_m, cfg.path_step_m) for gr in grasps])
+    res = track_paths(spec, paths @ T_tool_flange, seed, track_limits(cfg))
+    out: list[tuple[float, Grasp]] = []
+    rej = rejected if rejected is not None else {}
+    rej.setdefault("unreachable", 0)
+    rej.setdefault("collision", 0)
+    for b, gr in enumerate(grasps):
+        if not res.ok[b]:
+            rej["unreachable"] += 1
+            continue
+        q_pre, q_grasp = res.q[b, 0], res.q[b, -1]
+        if collision_check is not None and (collision_check(q_pre, None) or collision_check(q_grasp, None)):
+            rej["collision"] += 1
+            continue
+        out.append((float(res.cost[b]), replace(gr, q=q_grasp.copy())))
+    out.sort(key=lambda t: (-t[1].quality, t[0]))
+    return [g for _, g in out]
+
+
+def compute_grasps(
+    obj: ObjectSpec,
+    spec: RobotSpec,
+    T_flange_tool: Array,
+    seed: Array,
+    cfg: GraspSettings,
+    stroke_m: float,
+    collision_check: CollisionCheck | None = None,
+    num_candidates: int | None = None,
+    check_reach: bool = True,
+) -> GraspSet:
+    """Ranked, force-closed, reachable grasps for ``obj`` (best first, at most ``num_candidates``)."""
+    result = synthesize(obj, cfg, stroke_m)
+    if check_reach:
+        result.grasps = filter_reachable(
+            result.grasps, spec, T_flange_tool, seed, cfg, collision_check, result.rejected
+        )
+    result.grasps = result.grasps[: num_candidates or cfg.num_candidates]
+    return result

@@ -1,0 +1,1 @@
+"""Task orchestration: the pick cycle state machine, recovery, status and pick events."""

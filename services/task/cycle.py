@@ -1,0 +1,382 @@
+"""The pick cycle: INIT → DETECT → PLAN → APPROACH → GRASP → LIFT → REORIENT → PLACE →
+RELEASE → DONE, with DETECT_FAILED → RETRY → ABORT and the recovery of LLD §15.2.
+
+The orchestrator only awaits its ports (never blocks the event loop), runs every state
+under a deadline, times each stage, and resumes from the failed step: a failed
+detection looks again, an unplannable grasp tries the next option, a robot alarm is
+cleared and the rest is replanned from where the arm stands, a grasp that did not
+hold is retried with an adjusted grasp, and a safety stop hands over to the operator.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+import uuid
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from services.common.errors import (
+    GraspFailureError,
+    ObjectNotDetectedError,
+    PlanningError,
+    RobotError,
+    SafetyError,
+)
+from services.common.frames import matrix_to_quat_xyzw
+from services.motion.trajectory import JointTrajectory
+from services.task.placement import free_place_xy, place_candidates
+from services.task.plan import state_for
+from services.task.ports import (
+    GraspPlan,
+    GraspPort,
+    MotionPort,
+    Observation,
+    RobotPort,
+    SeenBox,
+    SeenRod,
+    VisionPort,
+)
+from services.task.recovery import Action, Attempts, RetryLimits, decide
+from services.task.states import CycleState, PickOutcome, StateDeadlines
+
+log = logging.getLogger("pickplace.task.cycle")
+
+StateListener = Callable[[CycleState, str], None]
+RESUME_TOLERANCE_RAD = np.deg2rad(0.5)
+OBJECT_MARGIN_M = 0.0  # the motion scene pads every box already (motion.padding_m)
+
+
+@dataclass(frozen=True)
+class CycleConfig:
+    limits: RetryLimits = field(default_factory=RetryLimits)
+    deadlines: StateDeadlines = field(default_factory=StateDeadlines)
+    detect_retry_delay_s: float = 0.5
+    verify_grasp: bool = True  # check the gripper's object signal after LIFT
+    place_xy: tuple[float, float] | None = (0.45, 0.0)  # None: the grasp service's configured spot
+    place_region_min: tuple[float, float] = (0.35, -0.25)
+    place_region_max: tuple[float, float] = (0.60, 0.25)
+    place_clearance_m: float = 0.06
+    grasp_offsets_m: tuple[float, ...] = (0.0, 0.035, -0.035, 0.055, -0.055, 0.075, -0.075)
+    home_joints: tuple[float, ...] | None = None  # rad; each cycle starts here (clear camera view)
+
+
+class CycleAborted(Exception):
+    """The cycle gave up; the outcome says why."""
+
+
+class Orchestrator:
+    def __init__(self, vision: VisionPort, grasp: GraspPort, motion: MotionPort, robot: RobotPort,
+                 config: CycleConfig | None = None, on_state: StateListener | None = None):
+        self.vision, self.grasp, self.motion, self.robot = vision, grasp, motion, robot
+        self.config = config or CycleConfig()
+        self._on_state = on_state
+        self.state = CycleState.IDLE
+        self._outcome: PickOutcome | None = None
+        self._stage_t0 = 0.0
+
+    # ------------------------------------------------------------------ bookkeeping
+    def _enter(self, state: CycleState, message: str = "") -> None:
+        now = time.perf_counter()
+        out = self._outcome
+        if out is not None and self.state not in (CycleState.IDLE,):
+            key = self.state.value
+            out.stage_durations_s[key] = out.stage_durations_s.get(key, 0.0) + (now - self._stage_t0)
+        self._stage_t0 = now
+        self.state = state
+        if out is not None and state not in (CycleState.ABORT, CycleState.DETECT_FAILED,
+                                             CycleState.RETRY, CycleState.ESTOP, CycleState.ERROR):
+            out.stage_reached = state.value
+        log.info("state %s %s", state.value, message)
+        if self._on_state is not None:
+            self._on_state(state, message)
+
+    async def _timed(self, aw, seconds: float, what: str):  # type: ignore[no-untyped-def]
+        try:
+            async with asyncio.timeout(seconds):
+                return await aw
+        except TimeoutError:
+            raise RobotError(f"{what} did not finish within its {seconds:.0f} s deadline") from None
+
+    # ------------------------------------------------------------------ the cycle
+    async def run(self, task: str = "stand-rod") -> PickOutcome:
+        t0 = time.perf_counter()
+        out = PickOutcome(pick_id=uuid.uuid4().hex, task=task,
+                          object_class="rod" if task == "stand-rod" else "cube")
+        self._outcome = out
+        attempts = Attempts()
+        self._enter(CycleState.INIT)
+        try:
+            await self._timed(self.robot.recover(), self.config.deadlines.motion_s, "robot preparation")
+            await self._go_home()
+            await self._cycle(task, out, attempts)
+            out.success = True
+            self._enter(CycleState.DONE, "object placed")
+        except CycleAborted as exc:
+            out.success = False
+            out.failure_reason = out.failure_reason or str(exc)
+            self._enter(CycleState.ABORT, out.failure_reason)
+        except SafetyError as exc:
+            out.success = False
+            out.failure_reason = str(exc)
+            out.error_code = type(exc).__name__
+            self._enter(CycleState.ESTOP, str(exc))
+            raise
+        finally:
+            out.attempts = attempts.total
+            out.cycle_time_s = time.perf_counter() - t0
+            self._outcome = None
+        return out
+
+    async def _cycle(self, task: str, out: PickOutcome, attempts: Attempts) -> None:
+        while True:  # each pass: detect → plan → execute; recovery loops back here
+            obs = await self._detect(out, attempts)
+            plan, trajs = await self._plan(task, obs, out, attempts)
+            if plan is None:
+                continue  # re-detect (planning asked for it)
+            try:
+                await self._execute(plan, trajs, obs)
+                self._enter(CycleState.DONE, "returning to safe home")
+                await self._return_home(plan, obs)
+                return
+            except SafetyError:
+                raise
+            except RobotError as exc:
+                action = decide(exc, attempts, self.config.limits)
+                out.error_code = type(exc).__name__
+                log.warning("execution failed in %s: %s → %s", self.state.value, exc, action.value)
+                if action is Action.WAIT_FOR_OPERATOR:
+                    raise
+                if action is Action.ABORT:
+                    await self._leave_safe()
+                    raise CycleAborted(f"{self.state.value}: {exc}") from exc
+                await self.robot.recover()
+                if action is Action.REGRASP:
+                    await self._back_off_open()
+                # CLEAR_AND_RESUME / REGRASP / NEXT_GRASP: detect again and plan from where the arm is
+
+    # ------------------------------------------------------------------ DETECT
+    async def _detect(self, out: PickOutcome, attempts: Attempts) -> Observation:
+        while True:
+            self._enter(CycleState.DETECT)
+            try:
+                obs = await self._timed(self.vision.observe(), self.config.deadlines.detect_s, "detection")
+                if out.task == "stand-rod" and not obs.rods:
+                    raise ObjectNotDetectedError("no rod detected: " + ("; ".join(obs.notes) or "empty table"))
+                if out.task == "sort-cubes" and not obs.cubes:
+                    raise ObjectNotDetectedError("no cube detected: " + ("; ".join(obs.notes) or "empty table"))
+                return obs
+            except RobotError as exc:
+                action = decide(exc, attempts, self.config.limits)
+                out.error_code = type(exc).__name__
+                self._enter(CycleState.DETECT_FAILED, str(exc))
+                if action is not Action.RETRY_DETECT:
+                    out.failure_reason = f"DETECT: {exc} (after {attempts.detect} retries)"
+                    raise CycleAborted(out.failure_reason) from exc
+                self._enter(CycleState.RETRY, f"detection retry {attempts.detect}/{self.config.limits.detect}")
+                # doubling waits: a restarting vision service or a passing occlusion gets time
+                await asyncio.sleep(self.config.detect_retry_delay_s * 2 ** (attempts.detect - 1))
+
+    # ------------------------------------------------------------------ PLAN
+    async def _plan(self, task: str, obs: Observation, out: PickOutcome,
+                    attempts: Attempts) -> tuple[GraspPlan | None, list[JointTrajectory | None]]:
+        while True:
+            self._enter(CycleState.PLAN, f"grasp option {attempts.grasp_variants}")
+            try:
+                return await self._timed(self._plan_once(task, obs, out, attempts.grasp_variants),
+                                         self.config.deadlines.plan_s, "planning")
+            except PlanningError as exc:
+                action = decide(exc, attempts, self.config.limits)
+                out.error_code = type(exc).__name__
+                if action is not Action.NEXT_GRASP:
+                    out.failure_reason = f"PLAN: {exc}"
+                    raise CycleAborted(out.failure_reason) from exc
+                log.info("plan option failed (%s); trying the next one", exc)
+
+    async def _plan_once(self, task: str, obs: Observation, out: PickOutcome,
+                         alternative: int) -> tuple[GraspPlan, list[JointTrajectory | None]]:
+        q = await self.robot.joints()
+        # everything on the table that is not the target is an obstacle for the carried object too
+        target_cube = obs.cubes[0] if task == "sort-cubes" and obs.cubes else None
+        obs = replace(obs, obstacles=obs.obstacles + tuple(
+            _box_around(c.centroid, c.size / 2 + OBJECT_MARGIN_M) for c in obs.cubes if c is not target_cube
+        ) + tuple(_box_around(r.center, r.length / 2 + OBJECT_MARGIN_M) for r in obs.rods[1:]))
+        if task == "stand-rod":
+            rod = obs.rods[0]
+            place = None
+            if self.config.place_xy is not None:
+                cands = place_candidates(np.asarray(self.config.place_xy), np.asarray(self.config.place_region_min),
+                                         np.asarray(self.config.place_region_max))
+                place = free_place_xy(obs, cands, self.config.place_clearance_m)
+                if place is None:
+                    raise PlanningError(f"no free spot to stand the rod near {self.config.place_xy} "
+                                        f"({len(cands)} candidates, clearance {self.config.place_clearance_m} m)")
+            # recovery options: grasp the rod at other points along it (a neighbour may block the
+            # fingers at its centre; the twin notes show ±50 mm off-centre still stands the rod, and
+            # ±75 mm (pads 14 mm inside the end) was seen to stand it in eval)
+            offsets = self.config.grasp_offsets_m
+            offset = offsets[alternative % len(offsets)]
+            plan = await self.grasp.plan_rod(rod, q, obs.obstacles, alternative // len(offsets), place, offset)
+            out.object_id = _object_id(rod)
+        else:
+            cube = obs.cubes[0]
+            plan = await self.grasp.plan_cube(cube, q, obs.obstacles, alternative)
+            out.object_class = f"cube_{cube.color}"
+            out.object_id = f"cube@{cube.centroid[0]:.3f},{cube.centroid[1]:.3f}"
+        out.grasp_quality = plan.quality
+        grasp_wp = next((w for w in plan.waypoints if w.gripper == "close"), plan.waypoints[0])
+        out.pick_pose = _pose_list(grasp_wp.T_base_tool)
+        out.place_pose = [*map(float, plan.place_position), 0.0, 0.0, 0.0, 1.0]
+        trajs: list[JointTrajectory | None] = []
+        start = q
+        for w in plan.waypoints:
+            traj = await self._motion_for(w, start, obs, plan)
+            trajs.append(traj)
+            if traj is not None:
+                start = traj.positions[-1]
+        return plan, trajs
+
+    async def _motion_for(self, w, start: np.ndarray, obs: Observation, plan: GraspPlan):  # type: ignore[no-untyped-def]
+        held = plan.held_object if w.holding else None
+        idx = plan.waypoints.index(w)
+        lifting_off = w.holding and idx > 0 and not plan.waypoints[idx - 1].holding
+        if w.motion == "hold" or (w.motion == "joint" and np.max(np.abs(w.joints - start)) < 1e-9):
+            return None
+        if w.motion == "joint":
+            return await self.motion.plan_joint(start, w.joints, obs.obstacles, held)
+        T = w.T_base_tool.copy()
+        if w.guard_force_n > 0:
+            T[:3, 3] += w.guard_overtravel_m * w.guard_direction
+        traj = await self.motion.plan_linear(start, T, obs.obstacles, held, slow=w.guard_force_n > 0,
+                                             table_contact=lifting_off or w.guard_force_n > 0)
+        if w.guard_force_n > 0 and w.guard_speed_m_s > 0:
+            # a guarded approach goes no faster than the grasp plan's touch-down speed
+            dist = float(np.linalg.norm(T[:3, 3] - (await self.motion.tool_pose(start))[:3, 3]))
+            needed = dist / w.guard_speed_m_s
+            if traj.duration < needed:
+                traj = traj.scaled(needed / traj.duration)
+        return traj
+
+    # ------------------------------------------------------------------ EXECUTE
+    async def _execute(self, plan: GraspPlan, trajs: list[JointTrajectory | None], obs: Observation) -> None:
+        cfg = self.config
+        for i, (w, traj) in enumerate(zip(plan.waypoints, trajs, strict=True)):
+            state = state_for(w.name)
+            if state is not self.state:
+                self._enter(state, w.name)
+            if traj is not None:
+                q_now = await self.robot.joints()
+                if np.max(np.abs(traj.positions[0] - q_now)) > RESUME_TOLERANCE_RAD:
+                    # the arm is not where the plan assumed (a guarded stop, say): replan from here
+                    traj = await self._timed(self._motion_for(w, q_now, obs, plan), cfg.deadlines.plan_s,
+                                             f"replanning {w.name}")
+                if traj is not None:
+                    res = await self._timed(self.robot.execute(traj, w.guard_force_n), cfg.deadlines.motion_s,
+                                            f"motion to {w.name}")
+                    log.debug("%s: planned %.2f s, executed %.2f s%s", w.name, traj.duration, res.duration_s,
+                              " (stopped on touch-down)" if res.stopped_early else "")
+                    if w.guard_force_n > 0 and not res.stopped_early:
+                        log.warning("%s: no touch-down detected within the overtravel", w.name)
+            if w.gripper is not None:
+                g = await self._timed(self.robot.gripper(w.gripper == "close"), cfg.deadlines.gripper_s,
+                                      f"gripper {w.gripper}")
+                if w.gripper == "close" and g.object_detected is False and cfg.verify_grasp:
+                    raise GraspFailureError(f"{w.name}: the gripper closed on nothing")
+            if state is CycleState.LIFT and cfg.verify_grasp and _is_last_of(plan, i, CycleState.LIFT):
+                holding = await self._timed(self.robot.holding(), cfg.deadlines.gripper_s, "grasp check")
+                if holding is False:
+                    raise GraspFailureError("grasp verification after LIFT: the object is not in the gripper")
+
+    async def _go_home(self) -> None:
+        """INIT: a cycle starts at the safe home, out of the camera's view of the table (after an
+        aborted cycle or a restart the arm may be anywhere)."""
+        if self.config.home_joints is None:
+            return
+        home = np.asarray(self.config.home_joints, dtype=float)
+        q = await self.robot.joints()
+        if np.max(np.abs(q - home)) < 1e-3:
+            return
+        traj = await self._timed(self.motion.plan_joint(q, home, (), None), self.config.deadlines.plan_s,
+                                 "planning the way to safe home")
+        await self._timed(self.robot.execute(traj), self.config.deadlines.motion_s, "moving to safe home")
+
+    async def _return_home(self, plan: GraspPlan, obs: Observation) -> None:
+        """DONE: back to the plan's safe home, out of the camera's view of the table."""
+        home = plan.waypoints[0].joints
+        # what was placed is now an obstacle too (the rod standing where the plan put it)
+        obstacles = (*obs.obstacles, _placed_box(plan))
+        try:
+            q = await self.robot.joints()
+            if np.max(np.abs(q - home)) > 1e-3:
+                traj = await self._timed(self.motion.plan_joint(q, home, obstacles, None),
+                                         self.config.deadlines.plan_s, "planning the way home")
+                await self._timed(self.robot.execute(traj), self.config.deadlines.motion_s, "returning home")
+        except SafetyError:
+            raise
+        except RobotError as exc:  # the object is placed; a failed way home is reported, not fatal
+            log.warning("could not return to safe home after placing: %s", exc)
+
+    # ------------------------------------------------------------------ recovery helpers
+    async def _back_off_open(self) -> None:
+        """After a failed grasp: open and back away upward before looking again."""
+        await self.robot.gripper(False)
+        q = await self.robot.joints()
+        try:
+            up = await self.motion.plan_linear(q, _raised(await self.motion.tool_pose(q), 0.08), (), None)
+            await self.robot.execute(up)
+        except RobotError as exc:
+            log.warning("could not back off after a failed grasp: %s", exc)
+
+    async def _leave_safe(self) -> None:
+        """Before giving up: stop whatever moves; the arm stays where it is, enabled and idle."""
+        try:
+            await self.robot.stop()
+        except RobotError as exc:
+            log.warning("stop while aborting failed: %s", exc)
+
+
+PLACED_TOP_CLEARANCE_M = 0.03
+
+
+def _placed_box(plan: GraspPlan) -> SeenBox:
+    """The placed object's footprint, from the table up to its height."""
+    held = plan.held_object
+    radius = float(getattr(held, "radius", 0.0) or 0.0) or 0.02
+    height = float(getattr(held, "length", 0.0) or 0.0) or 0.06
+    if plan.task == "sort-cubes":
+        size = list(getattr(held, "size", []) or [0.05, 0.05, 0.05])
+        radius, height = max(size[:2]) / 2, size[2]
+    p = np.asarray(plan.place_position, dtype=float)
+    # taller by what the collision model leaves out at the open jaw's tips (motion.tool finger
+    # clearance + pad): a way home skimming the top would catch the rod with them and knock it over
+    height += PLACED_TOP_CLEARANCE_M
+    return SeenBox(np.array([p[0] - radius, p[1] - radius, 0.0]), np.array([p[0] + radius, p[1] + radius, height]))
+
+
+def _box_around(center: np.ndarray, half: float) -> SeenBox:
+    lo = np.asarray(center, dtype=float) - half
+    lo[2] = min(lo[2], 0.0)  # down to the table
+    return SeenBox(lo, np.asarray(center, dtype=float) + half)
+
+
+def _is_last_of(plan: GraspPlan, i: int, state: CycleState) -> bool:
+    nxt = plan.waypoints[i + 1].name if i + 1 < len(plan.waypoints) else ""
+    return state_for(nxt) is not state
+
+
+def _raised(T: np.ndarray, dz: float) -> np.ndarray:
+    out = T.copy()
+    out[2, 3] += dz
+    return out
+
+
+def _pose_list(T: np.ndarray) -> list[float]:
+    q = matrix_to_quat_xyzw(T[:3, :3])
+    return [float(T[0, 3]), float(T[1, 3]), float(T[2, 3]), *map(float, q)]
+
+
+def _object_id(rod: SeenRod) -> str:
+    return f"rod@{rod.center[0]:.3f},{rod.center[1]:.3f}"

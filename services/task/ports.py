@@ -1,0 +1,125 @@
+"""What the orchestrator needs from the rest of the cell, as small async interfaces.
+
+The task service implements these over gRPC (``clients.py``); tests may inject
+scripted fakes. Everything is in the base frame, SI units.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from services.motion.trajectory import JointTrajectory
+
+
+@dataclass(frozen=True)
+class SeenRod:
+    center: np.ndarray  # m, base frame
+    axis: np.ndarray  # unit
+    length: float
+    diameter: float
+    confidence: float
+
+
+@dataclass(frozen=True)
+class SeenCube:
+    centroid: np.ndarray
+    color: str
+    size: float = 0.05
+
+
+@dataclass(frozen=True)
+class SeenBox:
+    min: np.ndarray
+    max: np.ndarray
+
+
+@dataclass(frozen=True)
+class Observation:
+    rods: tuple[SeenRod, ...] = ()
+    cubes: tuple[SeenCube, ...] = ()
+    obstacles: tuple[SeenBox, ...] = ()
+    notes: tuple[str, ...] = ()
+    latency_ms: float = 0.0
+
+
+@dataclass(frozen=True)
+class MoveOutcome:
+    final_q: np.ndarray
+    duration_s: float
+    stopped_early: bool = False
+
+
+@dataclass(frozen=True)
+class GripOutcome:
+    closed: bool
+    object_detected: bool | None
+
+
+@dataclass
+class PlannedWaypoint:
+    name: str
+    motion: str  # "joint" | "linear" | "hold"
+    T_base_tool: np.ndarray
+    joints: np.ndarray
+    gripper: str | None = None  # "open" | "close"
+    guard_force_n: float = 0.0
+    guard_overtravel_m: float = 0.0
+    guard_direction: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, -1.0]))
+    guard_speed_m_s: float = 0.0
+    holding: bool = False
+
+
+@dataclass
+class GraspPlan:
+    task: str
+    waypoints: list[PlannedWaypoint]
+    quality: float
+    held_object: object | None  # motion's AttachedObject message, sent while holding
+    place_position: np.ndarray
+    summary: str = ""
+
+
+class VisionPort(Protocol):
+    async def observe(self) -> Observation: ...
+
+
+class GraspPort(Protocol):
+    async def plan_rod(self, rod: SeenRod, q_now: np.ndarray, obstacles: tuple[SeenBox, ...],
+                       alternative: int, place_xy: np.ndarray | None = None,
+                       grasp_offset_m: float | None = None) -> GraspPlan: ...
+
+    async def plan_cube(self, cube: SeenCube, q_now: np.ndarray, obstacles: tuple[SeenBox, ...],
+                        alternative: int) -> GraspPlan: ...
+
+
+class MotionPort(Protocol):
+    async def plan_joint(self, start: np.ndarray, goal: np.ndarray, obstacles: tuple[SeenBox, ...],
+                         held: object | None) -> JointTrajectory: ...
+
+    async def plan_linear(self, start: np.ndarray, T_goal: np.ndarray, obstacles: tuple[SeenBox, ...],
+                          held: object | None, slow: bool = False, table_contact: bool = False) -> JointTrajectory:
+        """A straight tool line; ``table_contact`` lets the held object touch the table (lift-off,
+        set-down)."""
+
+    async def tool_pose(self, q: np.ndarray) -> np.ndarray: ...
+
+
+class RobotPort(Protocol):
+    async def joints(self) -> np.ndarray: ...
+
+    async def execute(self, traj: JointTrajectory, force_guard_n: float = 0.0) -> MoveOutcome: ...
+
+    async def gripper(self, close: bool) -> GripOutcome: ...
+
+    async def holding(self) -> bool | None:
+        """Whether the gripper's object sensor sees the object (None: no sensor mapped)."""
+
+    async def recover(self) -> None:
+        """Clear alarms and enable."""
+
+    async def stop(self) -> None: ...
+
+    async def emergency_stop(self) -> None: ...

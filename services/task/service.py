@@ -1,0 +1,291 @@
+"""The task service: TaskController over gRPC, TaskStatus and PickEvents on Zenoh.
+
+A thin shell around :class:`Orchestrator`: it runs cycles on request, publishes
+status on every state change (and at ``task.status_rate_hz``), publishes one
+PickEvent per pick, and turns stop / e-stop into immediate robot commands.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import time
+from collections.abc import AsyncIterator, Callable
+
+import grpc
+import numpy as np
+from pickplace.v1 import common_pb2, task_pb2, task_pb2_grpc
+
+from services.common import grpc_util
+from services.common.bus import Bus
+from services.common.errors import InvalidInputError, SafetyError
+from services.common.keys import CellKeys
+from services.common.settings import Settings
+from services.task.clients import CellClients
+from services.task.cycle import CycleConfig, Orchestrator
+from services.task.messages import pick_event_msg
+from services.task.recovery import RetryLimits
+from services.task.states import CycleState, PickOutcome, StateDeadlines, TaskCounters
+
+log = logging.getLogger("pickplace.task.service")
+
+TASKS = ("stand-rod", "sort-cubes")
+
+
+def cycle_config(settings: Settings) -> CycleConfig:
+    t = settings.task
+    home_deg = settings.grasp.safe_home_joints_deg.get(settings.robot.model)
+    return CycleConfig(
+        limits=RetryLimits(detect=t.detect_retries, grasp_variants=t.grasp_alternatives,
+                           alarms=t.alarm_recoveries, regrasps=t.regrasps),
+        deadlines=StateDeadlines(detect_s=t.detect_deadline_s, plan_s=t.plan_deadline_s,
+                                 motion_s=t.motion_deadline_s, gripper_s=t.gripper_deadline_s),
+        detect_retry_delay_s=t.detect_retry_delay_s,
+        verify_grasp=t.verify_grasp,
+        home_joints=tuple(float(np.deg2rad(v)) for v in home_deg) if home_deg is not None else None,
+    )
+
+
+class TaskRunner:
+    """Runs cycles, tracks counters and status, and reports every outcome."""
+
+    def __init__(self, settings: Settings, clients: CellClients, bus: Bus | None = None,
+                 between_cycles: Callable[[], object] | None = None):
+        self.settings = settings
+        self.clients = clients
+        self.bus = bus
+        self.keys = CellKeys(settings.cell_id)
+        self.counters = TaskCounters()
+        self.task = settings.task.task
+        self.state = CycleState.IDLE
+        self.message = ""
+        self.last_error = ""
+        self.cycle_index = 0
+        self.outcomes: list[PickOutcome] = []
+        self.listeners: list[Callable[[PickOutcome], None]] = []
+        self.between_cycles = between_cycles  # e.g. lay a new rod in the twin
+        self._status_queues: set[asyncio.Queue[task_pb2.TaskStatus]] = set()
+        self._loop_task: asyncio.Task[None] | None = None
+        self._seq = 0
+        self.orchestrator = Orchestrator(clients.vision, clients.grasp, clients.motion, clients.robot,
+                                         cycle_config(settings), on_state=self._on_state)
+
+    # ------------------------------------------------------------------ status
+    @property
+    def running(self) -> bool:
+        return self._loop_task is not None and not self._loop_task.done()
+
+    def status(self) -> task_pb2.TaskStatus:
+        from services.task.states import PROGRESS
+
+        self._seq += 1
+        return task_pb2.TaskStatus(
+            header=common_pb2.Header(stamp_ns=time.time_ns(), frame_id="base", seq=self._seq),
+            state=self.state.value, message=self.message, progress=PROGRESS.get(self.state, 0.0),
+            picks_completed=self.counters.picks_completed, picks_failed=self.counters.picks_failed,
+            average_cycle_time=self.counters.average_cycle_time, task=self.task, running=self.running,
+            cycle_index=self.cycle_index, last_error=self.last_error,
+        )
+
+    def publish_status(self) -> None:
+        msg = self.status()
+        if self.bus is not None:
+            try:
+                self.bus.publish(self.keys.task_status, msg)
+            except Exception as exc:
+                log.warning("publishing task status failed: %s", exc)
+        for q in list(self._status_queues):
+            if q.full():
+                q.get_nowait()
+            q.put_nowait(msg)
+
+    def _on_state(self, state: CycleState, message: str) -> None:
+        self.state = state
+        self.message = message
+        self.publish_status()
+
+    @contextlib.contextmanager
+    def status_subscription(self):  # type: ignore[no-untyped-def]
+        q: asyncio.Queue[task_pb2.TaskStatus] = asyncio.Queue(64)
+        self._status_queues.add(q)
+        try:
+            yield q
+        finally:
+            self._status_queues.discard(q)
+
+    # ------------------------------------------------------------------ cycles
+    async def run_cycle(self, task: str | None = None) -> PickOutcome:
+        task = task or self.task
+        if task not in TASKS:
+            raise InvalidInputError(f"unknown task {task!r}; choose one of {list(TASKS)}")
+        self.task = task
+        self.cycle_index += 1
+        outcome = await self.orchestrator.run(task)
+        self._report(outcome)
+        return outcome
+
+    def _report(self, outcome: PickOutcome) -> None:
+        self.counters.record(outcome)
+        self.outcomes.append(outcome)
+        if not outcome.success:
+            self.last_error = outcome.failure_reason
+        if self.bus is not None:
+            try:
+                self.bus.publish(self.keys.pick_events, pick_event_msg(outcome, self.settings.cell_id))
+            except Exception as exc:
+                log.warning("publishing pick event failed: %s", exc)
+        for cb in list(self.listeners):
+            cb(outcome)
+        self.publish_status()
+
+    async def _loop(self, cycles: int) -> None:
+        n = 0
+        try:
+            while cycles == 0 or n < cycles:
+                n += 1
+                try:
+                    await self.run_cycle()
+                except SafetyError as exc:
+                    self.last_error = str(exc)
+                    self._on_state(CycleState.ESTOP, f"safety stop: {exc}; waiting for the operator")
+                    return
+                if cycles and n >= cycles:
+                    break
+                if self.between_cycles is not None:
+                    res = self.between_cycles()
+                    if asyncio.iscoroutine(res):
+                        await res
+                await asyncio.sleep(self.settings.task.pause_between_cycles_s)
+            self._on_state(CycleState.IDLE, f"finished {n} cycle(s)")
+        except asyncio.CancelledError:
+            self._on_state(CycleState.STOPPED, "stopped by the operator")
+            raise
+
+    def start(self, task: str | None = None, cycles: int = 0) -> None:
+        if self.running:
+            raise InvalidInputError("the task is already running; stop it first")
+        if task:
+            if task not in TASKS:
+                raise InvalidInputError(f"unknown task {task!r}; choose one of {list(TASKS)}")
+            self.task = task
+        self._loop_task = asyncio.create_task(self._loop(cycles), name="task.loop")
+
+    async def wait(self) -> None:
+        if self._loop_task is not None:
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._loop_task
+
+    async def stop(self) -> None:
+        """Stop the loop and the arm now (the current cycle is abandoned, the arm held)."""
+        task, self._loop_task = self._loop_task, None
+        if task is not None and not task.done():
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await task
+        await self.clients.robot.stop()
+
+    async def emergency_stop(self) -> None:
+        """E-stop first, bookkeeping after."""
+        try:
+            await self.clients.robot.emergency_stop()
+        finally:
+            task, self._loop_task = self._loop_task, None
+            if task is not None and not task.done():
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError, Exception):
+                    await task
+            self.last_error = "emergency stop"
+            self._on_state(CycleState.ESTOP, "emergency stop pressed; release, clear and start again")
+
+
+class TaskControllerServicer(task_pb2_grpc.TaskControllerServicer):
+    def __init__(self, runner: TaskRunner):
+        self.runner = runner
+
+    async def Start(self, request, context):  # type: ignore[no-untyped-def]
+        if request.cycles < 0:
+            raise InvalidInputError(f"cycles must be >= 0, got {request.cycles}")
+        self.runner.start(request.task or None, request.cycles)
+        return common_pb2.CommandResponse(success=True, message=f"started {self.runner.task}")
+
+    async def Stop(self, request, context):  # type: ignore[no-untyped-def]
+        await self.runner.stop()
+        return common_pb2.CommandResponse(success=True, message="stopped")
+
+    async def EmergencyStop(self, request, context):  # type: ignore[no-untyped-def]
+        await self.runner.emergency_stop()
+        return common_pb2.CommandResponse(success=True, message="emergency stop pressed")
+
+    async def RunSingleCycle(self, request, context):  # type: ignore[no-untyped-def]
+        if self.runner.running:
+            raise InvalidInputError("the task loop is running; stop it before a single cycle")
+        outcome = await self.runner.run_cycle(request.task or None)
+        return pick_event_msg(outcome, self.runner.settings.cell_id)
+
+    async def GetStatus(self, request, context):  # type: ignore[no-untyped-def]
+        return self.runner.status()
+
+    async def StreamStatus(self, request, context) -> AsyncIterator[task_pb2.TaskStatus]:  # type: ignore[no-untyped-def]
+        with self.runner.status_subscription() as q:
+            yield self.runner.status()
+            while True:
+                yield await q.get()
+
+
+class TaskService:
+    def __init__(self, settings: Settings, bus: Bus | None = None, grpc_port: int | None = None,
+                 clients: CellClients | None = None):
+        self.settings = settings
+        self.clients = clients or CellClients(settings)
+        self.runner = TaskRunner(settings, self.clients, bus)
+        self.grpc_port = settings.grpc.task_port if grpc_port is None else grpc_port
+        self.server: grpc.aio.Server | None = None
+        self._ticker: asyncio.Task[None] | None = None
+
+    async def start(self) -> int:
+        self.server = grpc_util.create_server()
+        task_pb2_grpc.add_TaskControllerServicer_to_server(TaskControllerServicer(self.runner), self.server)
+        self.grpc_port = grpc_util.bind(self.server, self.settings.grpc.host, self.grpc_port)
+        await self.server.start()
+        self._ticker = asyncio.create_task(self._tick(), name="task.status")
+        log.info("task service on %s:%d", self.settings.grpc.host, self.grpc_port)
+        return self.grpc_port
+
+    async def _tick(self) -> None:
+        period = 1.0 / self.settings.task.status_rate_hz
+        while True:
+            await asyncio.sleep(period)
+            self.runner.publish_status()
+
+    async def stop(self) -> None:
+        if self._ticker is not None:
+            self._ticker.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._ticker
+        task = self.runner._loop_task
+        if task is not None and not task.done():
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await task
+        if self.server is not None:
+            await self.server.stop(grace=0.5)
+        await self.clients.close()
+
+    async def __aenter__(self) -> TaskService:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.stop()
+
+
+async def serve(settings: Settings) -> None:
+    async with Bus(settings.zenoh) as bus, TaskService(settings, bus) as svc:
+        assert svc.server is not None
+        if settings.task.reset_scene_each_cycle and settings.profile == "sim":
+            from services.sim.bus_link import request_scene_reset
+
+            # the simulated operator lays out a fresh scene in the sim-dobot process between cycles
+            svc.runner.between_cycles = lambda: request_scene_reset(bus, settings.cell_id)
+        await svc.server.wait_for_termination()

@@ -1,0 +1,223 @@
+"""Cube and obstacle perception (seed 004): depth thresholds, table plane, DBSCAN, colour labels.
+
+1. Cloud: depth within [min, max] on a pixel stride, points more than
+   ``plane_residual_m`` (0.02 m) above the table plane.
+2. DBSCAN (scikit-learn, ε = 0.015 m, minPts = 40 counted on a full 640-px-wide
+   image; the strided cloud is stride² sparser, so minPts is divided by that,
+   and the stride grows with the image width so larger images cost the same).
+3. Each cluster's mean colour (HSV) gives black / red / blue / green.
+4. The obstacle rule of seed 004, configurable: the cluster of the obstacle
+   colour that is large — by point count (≥ 10000 full-resolution pixels), by
+   size (≥ ``min_extent_m`` across), or both. Its axis-aligned box is the box of
+   its points together with their foot points on the table (the box stands on
+   the table), in the camera frame and in the base frame, plus a margin.
+5. Cubes: the cube of known size resting on the table is fitted to the
+   cluster's visible surface (robust least squares on the distance to the box
+   surface; x, y, yaw in the table plane), so the centre is the cube's centre,
+   not the centroid of the faces the camera happens to see.
+"""
+
+from __future__ import annotations
+
+import time
+
+import cv2
+import numpy as np
+from sklearn.cluster import DBSCAN
+
+from services.common.settings import CubeDetectionSettings
+from services.vision.camera import CameraIntrinsics
+from services.vision.geometry import (
+    Plane,
+    backproject,
+    project,
+    resolution_scale,
+    scaled_stride,
+    transform_points,
+)
+from services.vision.lsq import robust_least_squares
+from services.vision.results import CubeDetection, ObstacleBox
+
+Array = np.ndarray
+
+COLOR_LABELS = ("black", "red", "blue", "green")
+_MAX_CUBE_POINTS = 300
+
+
+def classify_color(mean_rgb: Array, black_value_max: int, min_saturation: int) -> str:
+    """Colour label of a cluster from its mean RGB (uint8 scale) through HSV."""
+    px = np.clip(np.rint(np.asarray(mean_rgb, dtype=float)), 0, 255).astype(np.uint8).reshape(1, 1, 3)
+    h, s, v = (int(x) for x in cv2.cvtColor(px, cv2.COLOR_RGB2HSV)[0, 0])
+    if v <= black_value_max:
+        return "black"
+    if s < min_saturation:
+        return "unknown"
+    if h < 10 or h >= 160:  # OpenCV hue is 0-179
+        return "red"
+    if 35 <= h < 90:
+        return "green"
+    if 90 <= h < 135:
+        return "blue"
+    return "unknown"
+
+
+def table_frame(plane: Plane) -> Array:
+    """T_camera_table: z = table normal (up), origin = foot of the camera on the table."""
+    n = plane.normal
+    x = np.array([1.0, 0.0, 0.0]) - n[0] * n
+    if np.linalg.norm(x) < 1e-6:
+        x = np.array([0.0, 1.0, 0.0]) - n[1] * n
+    x /= np.linalg.norm(x)
+    T = np.eye(4)
+    T[:3, :3] = np.column_stack([x, np.cross(n, x), n])
+    T[:3, 3] = -plane.d * n
+    return T
+
+
+def detect_cubes_and_obstacles(
+    color_rgb: Array,
+    depth_m: Array,
+    intr: CameraIntrinsics,
+    plane: Plane,
+    params: CubeDetectionSettings,
+    T_base_camera: Array | None = None,
+    exclude: Array | None = None,
+) -> tuple[list[CubeDetection], list[ObstacleBox], list[str], dict[str, float]]:
+    """Cubes (centre, colour) and obstacle boxes; notes on clusters that were neither.
+
+    ``exclude``: optional (H, W) bool mask of pixels already explained (e.g. detected rods).
+    Returns (cubes, obstacles, notes, timings in ms).
+    """
+    t0 = time.perf_counter()
+    stride = scaled_stride(params.cluster_stride, intr)
+    mask = None if exclude is None else ~exclude
+    pts, rows, cols = backproject(depth_m, intr, stride, mask, params.min_depth_m, params.max_depth_m)
+    h = plane.signed_distance(pts)
+    keep = (h > params.plane_residual_m) & (h < params.max_height_m)
+    pts, rows, cols = pts[keep], rows[keep], cols[keep]
+    notes: list[str] = []
+    scale = stride * stride / resolution_scale(intr) ** 2  # one strided point = this many 640-px pixels
+    min_samples = max(3, round(params.dbscan_min_points / scale))
+    if len(pts) < min_samples:
+        return [], [], ["nothing stands on the table"], {"cube_segmentation": _ms(t0)}
+    labels = DBSCAN(eps=params.dbscan_eps_m, min_samples=min_samples).fit_predict(pts)
+    t1 = time.perf_counter()
+
+    T_cam_table = table_frame(plane)
+    T_table_cam = np.linalg.inv(T_cam_table)
+    cubes: list[CubeDetection] = []
+    obstacles: list[ObstacleBox] = []
+    rule = params.obstacle
+    for k in range(labels.max() + 1):
+        sel = labels == k
+        n_full = round(np.count_nonzero(sel) * scale)
+        if n_full < params.min_cluster_points:
+            continue
+        cp = pts[sel]
+        colour = classify_color(color_rgb[rows[sel], cols[sel]].mean(axis=0), params.black_value_max,
+                                params.min_saturation)
+        local = transform_points(T_table_cam, cp)
+        (cx, cy), sides, angle = cv2.minAreaRect(local[:, :2].astype(np.float32))
+        extent = float(max(sides))
+        by_points = n_full >= rule.min_points
+        by_extent = extent >= rule.min_extent_m
+        large = {"points": by_points, "extent": by_extent, "either": by_points or by_extent,
+                 "both": by_points and by_extent}[rule.require]
+        if large and (rule.color == "any" or colour == rule.color):
+            obstacles.append(_obstacle_box(cp, plane, colour, n_full, intr, T_base_camera, rule.margin_m))
+            continue
+        size = params.cube_size_m
+        top = float(np.percentile(local[:, 2], 90))
+        if extent > 1.6 * size or not 0.7 * size < top < 1.3 * size:
+            notes.append(f"{colour} cluster of {n_full} px, {extent * 1000:.0f} mm across and "
+                         f"{top * 1000:.0f} mm high: neither a cube nor the obstacle")
+            continue
+        cubes.append(_fit_cube(local, (cx, cy, np.deg2rad(angle)), size, colour, n_full, T_cam_table, intr))
+    timings = {"cube_segmentation": (t1 - t0) * 1e3, "cube_pose": _ms(t1)}
+    if T_base_camera is not None:
+        cubes = [c.in_base(T_base_camera) for c in cubes]
+    return cubes, obstacles, notes, timings
+
+
+def _ms(t0: float) -> float:
+    return (time.perf_counter() - t0) * 1e3
+
+
+def _box_sdf(q: Array, half: float) -> tuple[Array, Array]:
+    """Signed distance of points (cube frame) to an axis-aligned cube's surface, and its gradient."""
+    d = np.abs(q) - half
+    out = np.maximum(d, 0.0)
+    out_norm = np.linalg.norm(out, axis=1)
+    inside = out_norm <= 0.0
+    k = d.argmax(axis=1)
+    sdf = np.where(inside, d[np.arange(len(d)), k], out_norm)
+    grad = out / np.maximum(out_norm, 1e-12)[:, None]
+    grad[inside] = 0.0
+    grad[inside, k[inside]] = 1.0
+    return sdf, grad * np.sign(q)
+
+
+def _fit_cube(
+    local: Array, init: tuple[float, float, float], size: float, colour: str, n_full: int,
+    T_cam_table: Array, intr: CameraIntrinsics,
+) -> CubeDetection:
+    """Cube of known size resting on the table (x, y, yaw) fitted to its visible surface points."""
+    half = size / 2.0
+    if len(local) > _MAX_CUBE_POINTS:
+        local = local[np.linspace(0, len(local) - 1, _MAX_CUBE_POINTS).astype(int)]
+    px, py, qz = local[:, 0], local[:, 1], local[:, 2] - half
+
+    def cube_frame(x: Array) -> Array:
+        cx, cy, yaw = x
+        c, s = np.cos(yaw), np.sin(yaw)
+        dx, dy = px - cx, py - cy
+        return np.column_stack([c * dx + s * dy, -s * dx + c * dy, qz])
+
+    def residuals(x: Array) -> Array:
+        return _box_sdf(cube_frame(x), half)[0]
+
+    def jacobian(x: Array) -> Array:
+        q = cube_frame(x)
+        g = _box_sdf(q, half)[1]
+        c, s = np.cos(x[2]), np.sin(x[2])
+        return np.column_stack([
+            -c * g[:, 0] + s * g[:, 1],  # d/dcx
+            -s * g[:, 0] - c * g[:, 1],  # d/dcy
+            q[:, 1] * g[:, 0] - q[:, 0] * g[:, 1],  # d/dyaw
+        ])
+
+    fit = robust_least_squares(residuals, np.array(init, dtype=float), step=np.array([1e-5, 1e-5, 1e-4]),
+                               loss_scale=0.003, tol=np.array([2e-5, 2e-5, 2e-4]), jac=jacobian)
+    cx, cy, yaw = fit.x
+    res = fit.residuals
+    center_table = np.array([cx, cy, half])
+    R_table_cube = np.array([[np.cos(yaw), -np.sin(yaw), 0.0], [np.sin(yaw), np.cos(yaw), 0.0], [0.0, 0.0, 1.0]])
+    center_cam = T_cam_table[:3, :3] @ center_table + T_cam_table[:3, 3]
+    return CubeDetection(
+        centroid_cam=center_cam, color_label=colour, n_points=n_full,
+        rotation_cam=T_cam_table[:3, :3] @ R_table_cube,
+        fit_rms_m=float(np.sqrt(np.mean(np.minimum(np.abs(res), 0.01) ** 2))),
+        image_uv=project(center_cam[None], intr)[0],
+    )
+
+
+def _obstacle_box(
+    cp: Array, plane: Plane, colour: str, n_full: int, intr: CameraIntrinsics,
+    T_base_camera: Array | None, margin: float,
+) -> ObstacleBox:
+    solid = np.vstack([cp, plane.project(cp)])  # the box stands on the table
+    lo, hi = solid.min(axis=0) - margin, solid.max(axis=0) + margin
+    corners_cam = _box_corners(lo, hi)
+    min_base = max_base = None
+    if T_base_camera is not None:
+        pb = transform_points(T_base_camera, solid)
+        min_base, max_base = pb.min(axis=0) - margin, pb.max(axis=0) + margin
+        # draw the base-frame box (the one the planner uses) when we have it
+        corners_cam = transform_points(np.linalg.inv(T_base_camera), _box_corners(min_base, max_base))
+    return ObstacleBox(min_cam=lo, max_cam=hi, n_points=n_full, color_label=colour,
+                       corners_px=project(corners_cam, intr), min_base=min_base, max_base=max_base)
+
+
+def _box_corners(lo: Array, hi: Array) -> Array:
+    """The 8 corners, index bits (x, y, z) = (4, 2, 1)."""
+    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])

@@ -1,0 +1,385 @@
+"""Rod detector (seed 001 §3.1): a black cylinder of known size lying on the table.
+
+1. Segmentation: dark pixels (HSV value ≤ threshold). When the table itself is
+   dark (a black mat), only dark pixels that stand above the table plane or
+   have no depth are kept, so the rod is found on light and dark surfaces.
+2. Connected regions that pass the elongation test (aspect ratio ≫ 1) and show
+   depth evidence of standing above the table are rod candidates.
+3. Silhouette pose (needs no depth on the rod): the two long image edges of the
+   region back-project to planes tangent to the cylinder; the plane bisecting
+   them contains the axis, and the axis lies one radius above the table, so the
+   axis is where the bisector meets the table plane raised by r. The same edges
+   give a diameter measurement.
+4. Surface pose (when the rod has enough depth): the cylinder of known radius
+   resting on the table is fitted to the visible surface points (robust least
+   squares on the point-to-axis distance), not to their centroid — the visible
+   half's centroid sits ~r·0.4 off the axis.
+5. Ends: every pixel of the region is a ray; where it crosses the fitted
+   (infinite) cylinder gives an axial interval. The rod's far end is the largest
+   near-end of those intervals, its near end the smallest far-end: exact for a
+   flat-capped cylinder, whatever the perspective. Centre = midpoint, length =
+   distance between the ends.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from services.common.settings import RodDetectionSettings
+from services.vision.camera import CameraIntrinsics
+from services.vision.geometry import Plane, pixel_rays, project, ray_factors, resolution_scale
+from services.vision.lsq import robust_least_squares
+from services.vision.pose import estimate_pca_pose
+from services.vision.results import RodDetection
+
+Array = np.ndarray
+
+_EDGE_FRACTION = 0.35  # use the middle ±35 % of the region's length for edge lines (away from the caps)
+_MAX_FIT_POINTS = 800
+
+
+@dataclass(frozen=True)
+class _Axis:
+    point: Array  # a point on the axis (camera frame)
+    direction: Array  # unit
+
+
+def dark_mask(color_rgb: Array, value_max: int) -> Array:
+    """HSV value = max(R, G, B); dark where it is at most ``value_max``."""
+    r, g, b = cv2.split(color_rgb)
+    return cv2.max(cv2.max(r, g), b) <= value_max
+
+
+def height_map(depth_m: Array, intr: CameraIntrinsics, plane: Plane) -> Array:
+    """Height of every pixel's 3D point above the table plane (NaN where there is no depth)."""
+    xs, ys = ray_factors(intr)
+    n = plane.normal.astype(np.float32)
+    scale = n[0] * xs[None, :] + n[1] * ys[:, None] + n[2]
+    h = depth_m * scale + np.float32(plane.d)
+    return np.where(depth_m > 0, h, np.float32(np.nan))
+
+
+def heights_at(depth_m: Array, intr: CameraIntrinsics, plane: Plane, rows: Array, cols: Array) -> Array:
+    """Heights above the table of the given pixels (NaN where there is no depth)."""
+    z = depth_m[rows, cols].astype(float)
+    h = (pixel_rays(intr, rows, cols) @ plane.normal) * z + plane.d
+    return np.where(z > 0, h, np.nan)
+
+
+def table_is_dark(color_rgb: Array, depth_m: Array, intr: CameraIntrinsics, plane: Plane, value_max: int,
+                  tol_m: float) -> bool:
+    """Is the table surface itself dark (a black mat)? Median value of on-table pixels, strided."""
+    rows, cols = np.mgrid[4 : intr.height : 8, 4 : intr.width : 8]
+    rows, cols = rows.ravel(), cols.ravel()
+    with np.errstate(invalid="ignore"):
+        on = np.abs(heights_at(depth_m, intr, plane, rows, cols)) < tol_m
+    if not np.any(on):
+        return False
+    v = color_rgb[rows[on], cols[on]].max(axis=1)
+    return bool(np.median(v) <= value_max)
+
+
+def detect_rods(
+    color_rgb: Array,
+    depth_m: Array,
+    intr: CameraIntrinsics,
+    plane: Plane,
+    params: RodDetectionSettings,
+) -> tuple[list[RodDetection], list[str], dict[str, float]]:
+    """All rods in the frame, best first; notes on rejected candidates; stage timings (ms)."""
+    t0 = time.perf_counter()
+    t_pose = 0.0
+    notes: list[str] = []
+    r = params.diameter_m / 2.0
+    valid = depth_m > 0
+    thr = max(params.above_table_min_m, 3.0 * plane.rms_m)
+    h_max = params.diameter_m * 1.6 + 0.01
+    dark = dark_mask(color_rgb, params.dark_value_max)
+    dark_table = table_is_dark(color_rgb, depth_m, intr, plane, params.dark_value_max, max(thr, 0.005))
+    if dark_table:
+        with np.errstate(invalid="ignore"):
+            heights = height_map(depth_m, intr, plane)
+            cand = dark & (((heights > thr) & (heights < h_max)) | ~valid)
+    else:
+        cand = dark
+    mask = cand.astype(np.uint8)
+    if dark_table:  # isolated noisy pixels of a dark mat stand above the table too
+        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+    mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5)))
+    # Labels without OpenCV's stats (which cost 20x the labelling here).
+    n_lab, labels = cv2.connectedComponents(mask, connectivity=8)
+    areas = np.bincount(labels.ravel(), minlength=n_lab)
+
+    # Pixel lists of every labelled region in one pass (sorted by label), not one full-image scan each.
+    flat = np.flatnonzero(labels)
+    flat = flat[np.argsort(labels.ravel()[flat], kind="stable")]
+    starts = np.concatenate([[0], np.cumsum(areas[1:])])
+
+    rods: list[RodDetection] = []
+    min_area = params.min_area_px * resolution_scale(intr) ** 2
+    for k in np.nonzero(areas >= min_area)[0]:
+        if k == 0:
+            continue
+        rows, cols = np.divmod(flat[starts[k - 1] : starts[k]], labels.shape[1])
+        y0, x0 = int(rows.min()), int(cols.min())
+        h, w = int(rows.max()) - y0 + 1, int(cols.max()) - x0 + 1
+        crop = (slice(max(y0 - 2, 0), y0 + h + 2), slice(max(x0 - 2, 0), x0 + w + 2))
+        comp = labels[crop] == k
+        oy, ox = crop[0].start, crop[1].start
+        shape = _region_shape(rows, cols)
+        if shape is None or shape[2] < params.min_aspect_ratio:
+            if shape is not None and shape[2] >= 1.8:
+                notes.append(f"dark region at px ({x0 + w // 2}, {y0 + h // 2}) not elongated enough "
+                             f"(aspect {shape[2]:.1f} < {params.min_aspect_ratio})")
+            continue
+        comp_h = heights_at(depth_m, intr, plane, rows, cols)
+        comp_valid = np.isfinite(comp_h)
+        if np.any(comp_valid):
+            above_frac = float(np.mean((comp_h[comp_valid] > thr) & (comp_h[comp_valid] < h_max)))
+            if above_frac < 0.3:
+                notes.append(f"dark elongated region at px ({x0 + w // 2}, {y0 + h // 2}) lies flat on the "
+                             f"table ({above_frac:.0%} of it above), not a rod")
+                continue
+        tp = time.perf_counter()
+        det, why = _fit_rod(comp, (oy, ox), rows, cols, shape, depth_m, intr, plane, params, r)
+        t_pose += time.perf_counter() - tp
+        if det is None:
+            notes.append(why)
+            continue
+        rods.append(det)
+    rods.sort(key=lambda d: d.confidence, reverse=True)
+    if len(rods) > params.max_rods:
+        notes.append(f"{len(rods)} rods found, reporting the best {params.max_rods}")
+        rods = rods[: params.max_rods]
+    total = (time.perf_counter() - t0) * 1e3
+    return rods, notes, {"rod_segmentation": total - t_pose * 1e3, "rod_pose": t_pose * 1e3}
+
+
+def _region_shape(rows: Array, cols: Array) -> tuple[Array, Array, float, Array] | None:
+    """Image major/minor directions (unit, (x, y)), aspect ratio and centre of a pixel region.
+
+    The aspect ratio is sqrt of the ratio of the principal variances: length/width for a bar.
+    """
+    if len(rows) < 10:
+        return None
+    pts = np.column_stack([cols, rows]).astype(float)
+    c = pts.mean(axis=0)
+    q = pts - c
+    evals, evecs = np.linalg.eigh(q.T @ q / len(pts))
+    e, f = evecs[:, 1], evecs[:, 0]
+    aspect = float(np.sqrt(evals[1] / max(evals[0], 1e-6)))
+    return e, f, aspect, c
+
+
+def _edge_planes(
+    comp: Array, offset: tuple[int, int], shape: tuple[Array, Array, float, Array], intr: CameraIntrinsics
+) -> tuple[Array, Array] | None:
+    """Unit normals of the two planes through the camera tangent to the rod (positive inside)."""
+    contours, _ = cv2.findContours(comp.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    if not contours:
+        return None
+    contour = max(contours, key=len).reshape(-1, 2).astype(float) + [offset[1], offset[0]]
+    e, f, _, c = shape
+    a = (contour - c) @ e
+    b = (contour - c) @ f
+    span = a.max() - a.min()
+    mid = 0.5 * (a.max() + a.min())
+    central = np.abs(a - mid) < _EDGE_FRACTION * span
+    normals = []
+    for side in (1.0, -1.0):
+        pts = contour[central & (side * b > 0)]
+        if len(pts) < 8:
+            return None
+        vx, vy, x0, y0 = cv2.fitLine(pts.astype(np.float32), cv2.DIST_HUBER, 0, 0.01, 0.01).ravel()
+        n2d = np.array([-vy, vx], dtype=float)
+        if n2d @ (side * f) < 0:
+            n2d = -n2d  # outward
+        # Contour pixels are the outermost pixel centres: the true edge lies half a pixel further out.
+        line = np.array([n2d[0], n2d[1], -(n2d[0] * x0 + n2d[1] * y0) - 0.5])
+        n3 = -(intr.K.T @ line)  # plane through the camera; interior rays give n3·ray > 0
+        normals.append(n3 / np.linalg.norm(n3))
+    return normals[0], normals[1]
+
+
+def _silhouette_axis(n1: Array, n2: Array, plane: Plane, r: float) -> _Axis | None:
+    """Axis = bisector of the tangent planes ∩ table plane raised by r."""
+    m = n1 - n2
+    direction = np.cross(m, plane.normal)
+    norm = np.linalg.norm(direction)
+    if norm < 1e-9:
+        return None
+    A = np.vstack([m, plane.normal])
+    b = np.array([0.0, r - plane.d])
+    point = np.linalg.lstsq(A, b, rcond=None)[0]
+    return _Axis(point, direction / norm)
+
+
+def _measured_radius(n1: Array, n2: Array, plane: Plane, near: Array) -> float:
+    """Radius from the silhouette alone: the axis is as far from both tangent planes as from the table."""
+    A = np.vstack([n1 - n2, n1 - plane.normal])
+    b = np.array([0.0, plane.d])
+    p0 = np.linalg.lstsq(A, b, rcond=None)[0]
+    u = np.cross(A[0], A[1])
+    if np.linalg.norm(u) < 1e-9:
+        return float("nan")
+    u /= np.linalg.norm(u)
+    p = p0 + ((near - p0) @ u) * u
+    return float(0.5 * (n1 @ p + n2 @ p))
+
+
+def _ray_hits(rays: Array, axis: _Axis, r: float) -> tuple[Array, Array, Array]:
+    """Ray parameters (= depth for z = 1 rays) where rays enter/leave the infinite cylinder.
+
+    Returns (s_in, s_out, miss): ``miss`` > 0 for rays that pass the cylinder (then s_in = s_out =
+    the closest approach) and grows with the distance by which they miss.
+    """
+    u, a0 = axis.direction, axis.point
+    du = rays @ u
+    w = rays - np.outer(du, u)
+    q = -(a0 - (a0 @ u) * u)
+    A = np.maximum(np.einsum("ij,ij->i", w, w), 1e-12)
+    B = 2.0 * (w @ q)
+    C = q @ q - r * r
+    disc = B * B - 4 * A * C
+    sq = np.sqrt(np.abs(disc)) / (2 * A)
+    mid = -B / (2 * A)
+    hit = disc >= 0
+    s_in = np.where(hit, mid - sq, mid)
+    s_out = np.where(hit, mid + sq, mid)
+    return s_in, s_out, np.where(hit, 0.0, sq)
+
+
+def _surface_fit(points: Array, init: _Axis, plane: Plane, r: float, loss_scale: float) -> tuple[_Axis, Array]:
+    """Cylinder of radius r resting on the table, fitted to the measured depths: (axis, residuals).
+
+    The residual is measured depth minus the depth where the pixel's ray meets the model surface —
+    the direction the sensor noise acts in. (Point-to-axis distances are biased when the noise is
+    a fifth of the radius, which tilts the axis by up to ~1°.)
+    """
+    n = plane.normal
+    u0 = init.direction - (init.direction @ n) * n
+    u0 /= np.linalg.norm(u0)
+    e2 = np.cross(n, u0)
+    base = init.point - (plane.signed_distance(init.point[None])[0] - r) * n  # on the raised plane
+    z = points[:, 2]
+    rays = points / z[:, None]
+
+    def axis(x: Array) -> _Axis:
+        th, s = x
+        return _Axis(base + s * e2, np.cos(th) * u0 + np.sin(th) * e2)
+
+    def residuals(x: Array) -> Array:
+        s_in, _, miss = _ray_hits(rays, axis(x), r)
+        return z - s_in + miss
+
+    fit = robust_least_squares(residuals, np.zeros(2), step=np.array([1e-5, 1e-6]), loss_scale=loss_scale,
+                               tol=np.array([1e-5, 1e-6]))
+    return axis(fit.x), fit.residuals
+
+
+def _chord_ends(rays: Array, axis: _Axis, r: float) -> tuple[float, float]:
+    """Axial extent of the rod from its silhouette rays (see module docstring, step 5)."""
+    u, a0 = axis.direction, axis.point
+    s_in, s_out, _ = _ray_hits(rays, axis, r)  # rays that just miss (quantisation) use the closest approach
+    du = rays @ u
+    t1 = s_in * du - a0 @ u
+    t2 = s_out * du - a0 @ u
+    near_end = np.minimum(t1, t2)
+    far_end = np.maximum(t1, t2)
+    k = max(1, len(rays) // 500)  # ignore the few most extreme pixels (mask noise)
+    hi = float(np.partition(near_end, len(near_end) - k)[len(near_end) - k])
+    lo = float(np.partition(far_end, k - 1)[k - 1])
+    return lo, hi
+
+
+def _fit_rod(
+    comp: Array, offset: tuple[int, int], rows: Array, cols: Array, shape: tuple[Array, Array, float, Array],
+    depth_m: Array, intr: CameraIntrinsics, plane: Plane, params: RodDetectionSettings, r: float,
+) -> tuple[RodDetection | None, str]:
+    where = f"px ({shape[3][0]:.0f}, {shape[3][1]:.0f})"
+    planes = _edge_planes(comp, offset, shape, intr)
+    sil = _silhouette_axis(*planes, plane, r) if planes is not None else None
+
+    # Depth on the rod, away from its outline (edge pixels carry flying depth).
+    inner = cv2.erode(comp.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    ir, ic = np.nonzero(inner)
+    ir, ic = ir + offset[0], ic + offset[1]
+    z = depth_m[ir, ic]
+    hh = heights_at(depth_m, intr, plane, ir, ic)
+    with np.errstate(invalid="ignore"):
+        ok = (z > 0) & (hh > 0.1 * r) & (hh < 2.6 * r)
+    pts = pixel_rays(intr, ir[ok], ic[ok]) * z[ok, None].astype(float)
+    n_depth = len(pts)
+    if n_depth > _MAX_FIT_POINTS:  # an even spread is plenty for two parameters
+        pts = pts[np.linspace(0, n_depth - 1, _MAX_FIT_POINTS).astype(int)]
+
+    init = sil
+    if init is None and n_depth >= params.min_depth_points:
+        init = _pca_axis(pts, plane, r)
+    if init is None:
+        return None, f"dark elongated region at {where}: no usable outline or depth for a pose"
+    method, residuals = "silhouette", None
+    axis = init
+    if n_depth >= params.min_depth_points:
+        axis, residuals = _surface_fit(pts, init, plane, r, params.fit_loss_scale_m)
+        method = "surface_fit"
+    u = axis.direction
+    if u[0] < 0 or (abs(u[0]) < 1e-6 and u[1] < 0):
+        u = -u
+    axis = _Axis(axis.point, u)
+    rays = pixel_rays(intr, rows, cols)
+    lo, hi = _chord_ends(rays, axis, r)
+    center = axis.point + 0.5 * (lo + hi) * u
+    length = hi - lo
+    if planes is not None:
+        diameter = 2.0 * _measured_radius(*planes, plane, center)
+    else:  # silhouette edges unusable: the widest ray-to-axis distance
+        diameter = 2.0 * float(np.percentile(_ray_axis_distance(rays, axis), 98))
+    if not np.isfinite(diameter):
+        diameter = params.diameter_m
+
+    L0, D0 = params.length_m, params.diameter_m
+    if abs(length / L0 - 1.0) > params.length_tolerance:
+        return None, (f"dark elongated region at {where}: length {length * 1000:.0f} mm is not the "
+                      f"rod's {L0 * 1000:.0f} mm ± {params.length_tolerance:.0%}")
+    if abs(diameter / D0 - 1.0) > params.diameter_tolerance:
+        return None, (f"dark elongated region at {where}: diameter {diameter * 1000:.1f} mm is not the "
+                      f"rod's {D0 * 1000:.1f} mm ± {params.diameter_tolerance:.0%}")
+    score = np.exp(-0.5 * ((length - L0) / (0.1 * L0)) ** 2) * np.exp(-0.5 * ((diameter - D0) / (0.25 * D0)) ** 2)
+    if residuals is not None:
+        score *= float(np.mean(np.abs(residuals) < 2.5 * params.fit_loss_scale_m))
+        if sil is not None:  # disagreement between outline and surface lowers trust
+            score *= float(np.exp(-0.5 * (_line_gap(sil, axis, center) / (2 * params.fit_loss_scale_m)) ** 2))
+    else:
+        score *= 0.6  # outline only
+    ends = np.array([axis.point + lo * u, axis.point + hi * u])
+    det = RodDetection(
+        center_cam=center, axis_cam=u, up_cam=plane.normal.copy(), length_m=float(length),
+        diameter_m=float(diameter), confidence=float(np.clip(score, 0.0, 1.0)), method=method,
+        n_depth_points=n_depth, n_pixels=len(rows), endpoints_px=project(ends, intr),
+    )
+    return det, ""
+
+
+def _pca_axis(pts: Array, plane: Plane, r: float) -> _Axis:
+    """Initial axis from the depth points alone: the principal axis of their table footprint."""
+    pose = estimate_pca_pose(plane.project(pts))
+    return _Axis(pose.position + r * plane.normal, pose.rotation[:, 0])
+
+
+def _ray_axis_distance(rays: Array, axis: _Axis) -> Array:
+    u, a0 = axis.direction, axis.point
+    cr = np.cross(rays, u)
+    norm = np.linalg.norm(cr, axis=1)
+    return np.abs(cr @ (-a0)) / np.maximum(norm, 1e-12)
+
+
+def _line_gap(a: _Axis, b: _Axis, at: Array) -> float:
+    """Distance between two axis lines near ``at``."""
+    pa = a.point + ((at - a.point) @ a.direction) * a.direction
+    pb = b.point + ((at - b.point) @ b.direction) * b.direction
+    return float(np.linalg.norm(pa - pb))

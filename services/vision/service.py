@@ -1,0 +1,324 @@
+"""The vision service: frames in, objects out — Zenoh stream, `Vision.Detect` over gRPC, debug JPEG, metrics.
+
+A thin shell around :class:`~services.vision.pipeline.VisionPipeline`:
+
+- frames come from a camera it owns (RealSense, replay, or one passed in — the twin's in
+  ``pickplace up``), or from the Zenoh frame stream (``vision.camera.source: bus``);
+- detections are published on ``CellKeys.detected_objects`` (``DetectedObjects``) at up to
+  ``vision.rate_hz``, with a JPEG overlay on ``CellKeys.vision_debug_image``;
+- ``Vision.Detect`` answers on demand (on a frame in the request, or the newest one);
+- per-stage latency (capture, segmentation, pose, total) goes to the ``vision_latency_seconds``
+  histogram of :class:`~services.common.metrics.CellMetrics`.
+
+The camera-to-base transform comes from the calibration file, else the manual pose in the
+settings, else none (camera-frame results only, ``calibrated = false``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import threading
+import time
+from pathlib import Path
+
+import grpc
+import numpy as np
+from pickplace.v1 import common_pb2, vision_pb2, vision_pb2_grpc
+
+from services.common import grpc_util
+from services.common.bus import Bus
+from services.common.errors import (
+    CameraConnectionError,
+    ConfigurationError,
+    ObjectNotDetectedError,
+    VisionError,
+)
+from services.common.keys import CellKeys
+from services.common.metrics import CellMetrics
+from services.common.settings import REPO_ROOT, CalibrationSettings, CameraSourceSettings, Settings
+from services.vision.calibration import manual_T_base_camera, read_calibration
+from services.vision.camera import Camera, CameraIntrinsics, RGBDFrame
+from services.vision.messages import detections_msg, frame_to_msg, msg_to_frame
+from services.vision.overlay import overlay_jpeg
+from services.vision.pipeline import VisionPipeline, replace_timings
+from services.vision.results import DetectionResult
+
+log = logging.getLogger("pickplace.vision.service")
+
+Array = np.ndarray
+
+FRAME_WAIT_S = 2.0
+
+
+def load_T_base_camera(cal: CalibrationSettings) -> tuple[Array | None, str]:
+    """(T_base_camera, where it came from): the calibration file, the manual pose, or nothing."""
+    path = Path(cal.file)
+    if not path.is_absolute():
+        path = REPO_ROOT / path
+    if path.exists():
+        return read_calibration(path).T_base_camera, f"calibration file {path}"
+    if cal.manual_translation_m is not None and cal.manual_rpy_deg is not None:
+        return manual_T_base_camera(cal.manual_translation_m, rpy_deg=cal.manual_rpy_deg), "manual pose in settings"
+    return None, "none (camera-frame results only)"
+
+
+def make_camera(settings: CameraSourceSettings) -> Camera | None:
+    """The camera the service owns for this source; None for sources it does not open itself."""
+    if settings.source == "realsense":
+        from services.vision.realsense import RealSenseCamera
+
+        return RealSenseCamera.open(settings)
+    if settings.source == "replay":
+        if not settings.replay_dir:
+            raise ConfigurationError("vision.camera.source is 'replay' but vision.camera.replay_dir is not set")
+        from services.vision.replay import ReplayCamera
+
+        return ReplayCamera(settings.replay_dir, loop=settings.replay_loop)
+    return None  # "bus": frames arrive on Zenoh; "twin": the twin's camera is passed in by `pickplace up`
+
+
+class VisionServicer(vision_pb2_grpc.VisionServicer):
+    def __init__(self, service: VisionService):
+        self.service = service
+
+    async def Detect(self, request, context):  # type: ignore[no-untyped-def]
+        frame = msg_to_frame(request.frame) if request.HasField("frame") else None
+        result, used = await self.service.detect_once(frame)
+        response = vision_pb2.DetectResponse(objects=detections_msg(result, used.frame_id))
+        if request.include_debug_image:
+            response.debug_jpeg = self.service.latest_jpeg or b""
+        return response
+
+    async def GetDebugImage(self, request, context):  # type: ignore[no-untyped-def]
+        if self.service.latest_jpeg is None:
+            raise ObjectNotDetectedError("no frame has been processed yet, so there is no debug image")
+        return vision_pb2.DebugImage(header=self.service.latest_header, jpeg=self.service.latest_jpeg)
+
+
+class VisionService:
+    """Owns the pipeline, the frame source, the gRPC server and the publishing loop."""
+
+    def __init__(
+        self,
+        settings: Settings,
+        bus: Bus | None = None,
+        camera: Camera | None = None,
+        grpc_port: int | None = None,
+        metrics: CellMetrics | None = None,
+        T_base_camera: Array | None = None,
+        publish_loop: bool = True,
+    ):
+        self.settings = settings
+        self.bus = bus
+        self.camera = camera
+        self._owns_camera = False
+        self.keys = CellKeys(settings.cell_id)
+        self.pipeline = VisionPipeline(settings.vision)
+        self.metrics = metrics or CellMetrics()
+        if T_base_camera is not None:
+            self.T_base_camera: Array | None = np.asarray(T_base_camera, dtype=float)
+            self.calibration_source = "given"
+        else:
+            self.T_base_camera, self.calibration_source = load_T_base_camera(settings.vision.calibration)
+        self.grpc_port = settings.grpc.vision_port if grpc_port is None else grpc_port
+        self.server: grpc.aio.Server | None = None
+        self.publish_loop = publish_loop
+        self.latest_jpeg: bytes | None = None
+        self.latest_header = common_pb2.Header()
+        self.latest_result: DetectionResult | None = None
+        self.published = 0
+        self._bus_frame: RGBDFrame | None = None
+        self._bus_frame_event = asyncio.Event()
+        self._subscription: object | None = None
+        self._loop_task: asyncio.Task[None] | None = None
+        self._detect_lock = asyncio.Lock()
+
+    # --- lifecycle ---------------------------------------------------------------------------------
+    async def start(self) -> int:
+        if self.camera is None:
+            self.camera = await asyncio.to_thread(make_camera, self.settings.vision.camera)
+            self._owns_camera = self.camera is not None
+        if self.camera is None and self.bus is not None:
+            loop = asyncio.get_running_loop()
+            self._subscription = self.bus.subscribe_callback(
+                self.keys.camera_frames, lambda _k, payload: loop.call_soon_threadsafe(self._on_bus_frame, payload))
+        self.server = grpc_util.create_server()
+        vision_pb2_grpc.add_VisionServicer_to_server(VisionServicer(self), self.server)
+        self.grpc_port = grpc_util.bind(self.server, self.settings.grpc.host, self.grpc_port)
+        await self.server.start()
+        if self.publish_loop and (self.camera is not None or self._subscription is not None):
+            self._loop_task = asyncio.create_task(self._run(), name="vision.publish")
+        log.info("vision serving on %s:%d; camera %s; calibration: %s", self.settings.grpc.host, self.grpc_port,
+                 type(self.camera).__name__ if self.camera else "Zenoh frame stream", self.calibration_source)
+        return self.grpc_port
+
+    async def stop(self) -> None:
+        if self._loop_task is not None:
+            self._loop_task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._loop_task
+            self._loop_task = None
+        if self.server is not None:
+            await self.server.stop(grace=0.5)
+            self.server = None
+        if self._subscription is not None:
+            with contextlib.suppress(Exception):
+                self._subscription.undeclare()  # type: ignore[attr-defined]
+            self._subscription = None
+        if self._owns_camera and self.camera is not None:
+            await asyncio.to_thread(self.camera.close)
+            self.camera = None
+
+    async def __aenter__(self) -> VisionService:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.stop()
+
+    # --- frames ------------------------------------------------------------------------------------
+    def _on_bus_frame(self, payload: bytes) -> None:
+        try:
+            self._bus_frame = msg_to_frame(vision_pb2.RGBDFrame.FromString(payload))
+        except Exception as exc:  # a bad frame on the stream must not stop the service
+            log.warning("dropping an undecodable camera frame: %s", exc)
+            return
+        self._bus_frame_event.set()
+
+    async def _next_frame(self) -> tuple[RGBDFrame, float]:
+        """The newest frame and how long getting it took (s)."""
+        t0 = time.perf_counter()
+        if self.camera is not None:
+            frame = await asyncio.to_thread(self.camera.capture)
+            return frame, time.perf_counter() - t0
+        if self._subscription is None:
+            raise CameraConnectionError("the vision service has no camera and no frame stream")
+        self._bus_frame_event.clear()
+        try:
+            async with asyncio.timeout(FRAME_WAIT_S):
+                await self._bus_frame_event.wait()
+        except TimeoutError as exc:
+            raise CameraConnectionError(
+                f"no camera frame on {self.keys.camera_frames} within {FRAME_WAIT_S} s") from exc
+        assert self._bus_frame is not None
+        return self._bus_frame, time.perf_counter() - t0
+
+    # --- detection -----------------------------------------------------------------------------------
+    async def detect_once(self, frame: RGBDFrame | None = None) -> tuple[DetectionResult, RGBDFrame]:
+        """Detect on ``frame`` (or the newest one), record metrics, publish, refresh the overlay."""
+        capture_s = 0.0
+        if frame is None:
+            frame, capture_s = await self._next_frame()
+        async with self._detect_lock:  # one CPU-bound detection at a time, off the event loop
+            result = await asyncio.to_thread(self.pipeline.detect, frame, self.T_base_camera)
+            jpeg = await asyncio.to_thread(overlay_jpeg, frame.color, result,
+                                           self.settings.vision.debug_jpeg_quality)
+        result = replace_timings(result, capture=capture_s * 1e3)
+        self._observe(result)
+        self.latest_result = result
+        self.latest_jpeg = jpeg
+        self.latest_header = common_pb2.Header(stamp_ns=frame.stamp_ns or time.time_ns(), frame_id=frame.frame_id,
+                                               seq=frame.seq)
+        self._publish(result, frame, jpeg)
+        return result, frame
+
+    def _observe(self, result: DetectionResult) -> None:
+        t = result.timings_ms
+        stages = {
+            "capture": t.get("capture", 0.0),
+            "segmentation": t.get("plane", 0.0) + t.get("rod_segmentation", 0.0) + t.get("cube_segmentation", 0.0),
+            "pose": t.get("rod_pose", 0.0) + t.get("cube_pose", 0.0),
+            "total": t.get("total", 0.0) + t.get("capture", 0.0),
+        }
+        for stage, ms in stages.items():
+            self.metrics.vision_latency.labels(stage).observe(ms / 1e3)
+
+    def _publish(self, result: DetectionResult, frame: RGBDFrame, jpeg: bytes) -> None:
+        if self.bus is None:
+            return
+        try:
+            self.bus.publish(self.keys.detected_objects, detections_msg(result, frame.frame_id))
+            self.bus.publish(self.keys.vision_debug_image, vision_pb2.DebugImage(header=self.latest_header, jpeg=jpeg))
+            self.published += 1
+        except Exception as exc:  # the bus must never break detection
+            log.warning("zenoh publish failed: %s", exc)
+
+    async def _run(self) -> None:
+        period = 1.0 / self.settings.vision.rate_hz
+        failures = 0
+        while True:
+            t0 = time.monotonic()
+            try:
+                await self.detect_once()
+                failures = 0
+            except VisionError as exc:
+                failures += 1
+                if failures in (1, 10) or failures % 100 == 0:  # say it, without flooding the log
+                    log.warning("vision loop: %s (%d in a row)", exc, failures)
+            await asyncio.sleep(max(0.0, period - (time.monotonic() - t0)))
+
+
+class BusCamera:
+    """The Zenoh camera-frame stream as a :class:`Camera` (for the CLI: record, calibrate, check).
+
+    ``capture`` blocks (call it from a worker thread) until a frame newer than the last one arrives.
+    """
+
+    def __init__(self, bus: Bus, key: str, timeout_s: float = FRAME_WAIT_S):
+        self._cond = threading.Condition()
+        self._frame: RGBDFrame | None = None
+        self._taken = 0
+        self._timeout_s = timeout_s
+        self._key = key
+        self._sub = bus.subscribe_callback(key, self._on_frame)
+
+    def _on_frame(self, _key: str, payload: bytes) -> None:
+        try:
+            frame = msg_to_frame(vision_pb2.RGBDFrame.FromString(payload))
+        except VisionError as exc:
+            log.warning("dropping an undecodable camera frame: %s", exc)
+            return
+        with self._cond:
+            self._frame = frame
+            self._cond.notify_all()
+
+    @property
+    def intrinsics(self) -> CameraIntrinsics:
+        return self.capture(fresh=False).intrinsics
+
+    def capture(self, fresh: bool = True) -> RGBDFrame:
+        with self._cond:
+            ok = self._cond.wait_for(
+                lambda: self._frame is not None and (not fresh or id(self._frame) != self._taken), self._timeout_s)
+            if not ok or self._frame is None:
+                raise CameraConnectionError(f"no camera frame on {self._key} within {self._timeout_s} s")
+            self._taken = id(self._frame)
+            return self._frame
+
+    def close(self) -> None:
+        with contextlib.suppress(Exception):
+            self._sub.undeclare()
+
+
+async def publish_camera_frames(camera: Camera, bus: Bus, key: str, rate_hz: float, stop: asyncio.Event) -> int:
+    """Stream a camera's frames onto Zenoh (for ``vision.camera.source: bus`` consumers); returns the count."""
+    period = 1.0 / rate_hz
+    n = 0
+    while not stop.is_set():
+        t0 = time.monotonic()
+        frame = await asyncio.to_thread(camera.capture)
+        bus.publish(key, frame_to_msg(frame))
+        n += 1
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(max(0.0, period - (time.monotonic() - t0))):
+                await stop.wait()
+    return n
+
+
+async def serve(settings: Settings, camera: Camera | None = None) -> None:
+    """``pickplace serve vision``: run until cancelled."""
+    async with Bus(settings.zenoh) as bus, VisionService(settings, bus, camera) as svc:
+        assert svc.server is not None
+        await svc.server.wait_for_termination()
