@@ -1,0 +1,180 @@
+"""The gateway's gRPC edge (LLD §13.2) for clients outside the cell.
+
+It serves the ``RobotController`` of ``robot.proto`` by relaying each call to the robot driver
+(GetJointStates, MoveJoints, StreamJointStates, …; EmergencyStop on the gateway's own e-stop
+channel), and ``CellMetrics.StreamMetrics`` of ``gateway.proto``. Every call needs the gateway's
+token in its metadata: ``authorization: Bearer <token>``; without it, UNAUTHENTICATED.
+Errors from the driver pass through with their status code and pickplace error type.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import AsyncIterator, Awaitable, Callable
+from datetime import UTC, datetime
+from typing import TYPE_CHECKING, Any
+
+import grpc
+import grpc.aio
+from pickplace.v1 import common_pb2, gateway_pb2, gateway_pb2_grpc, robot_pb2_grpc
+
+from gateway.db.repository import PickRepository
+from gateway.security import bearer_from_header, token_matches
+from services.common import grpc_util
+
+if TYPE_CHECKING:
+    from gateway.app import Cell
+
+log = logging.getLogger("pickplace.gateway.edge")
+
+
+class TokenAuthInterceptor(grpc.aio.ServerInterceptor):
+    def __init__(self, token: str):
+        self._token = token
+
+    async def intercept_service(
+        self,
+        continuation: Callable[[grpc.HandlerCallDetails], Awaitable[grpc.RpcMethodHandler]],
+        details: grpc.HandlerCallDetails,
+    ) -> grpc.RpcMethodHandler:
+        handler = await continuation(details)
+        metadata = {k: v for k, v in (details.invocation_metadata or ())}
+        presented = bearer_from_header(metadata.get("authorization"))
+        if handler is None or token_matches(presented, self._token):
+            return handler
+        message = (
+            "missing 'authorization: Bearer <token>' metadata" if presented is None else "bearer token is not valid"
+        )
+
+        async def deny_unary(request: Any, context: grpc.aio.ServicerContext) -> Any:
+            await context.abort(grpc.StatusCode.UNAUTHENTICATED, message)
+
+        async def deny_stream(request: Any, context: grpc.aio.ServicerContext) -> AsyncIterator[Any]:
+            await context.abort(grpc.StatusCode.UNAUTHENTICATED, message)
+            yield  # pragma: no cover  (makes this an async generator)
+
+        if handler.unary_stream is not None:
+            return grpc.unary_stream_rpc_method_handler(
+                deny_stream, handler.request_deserializer, handler.response_serializer
+            )
+        return grpc.unary_unary_rpc_method_handler(deny_unary, handler.request_deserializer, handler.response_serializer)
+
+
+async def _passthrough(context: grpc.aio.ServicerContext, exc: grpc.aio.AioRpcError) -> None:
+    md = exc.trailing_metadata() or ()
+    kind = next((v for k, v in md if k == grpc_util.ERROR_TYPE_KEY), None)
+    if kind is not None:
+        context.set_trailing_metadata(((grpc_util.ERROR_TYPE_KEY, str(kind)),))
+    await context.abort(exc.code(), exc.details() or "")
+
+
+class RobotControllerRelay(robot_pb2_grpc.RobotControllerServicer):
+    """Each RPC forwarded to the robot driver with the caller's deadline (capped)."""
+
+    def __init__(self, cell: Cell, max_timeout_s: float = 120.0):
+        self._cell = cell
+        self._max_timeout_s = max_timeout_s
+
+    def _timeout(self, context: grpc.aio.ServicerContext) -> float:
+        remaining = context.time_remaining()
+        return min(remaining, self._max_timeout_s) if remaining is not None else self._max_timeout_s
+
+    async def _unary(self, name: str, request: Any, context: grpc.aio.ServicerContext, estop: bool = False) -> Any:
+        clients = self._cell.clients
+        stub = clients.estop_robot if estop else clients.robot
+        try:
+            return await getattr(stub, name)(request, timeout=self._timeout(context), wait_for_ready=estop)
+        except grpc.aio.AioRpcError as exc:
+            await _passthrough(context, exc)
+
+    async def GetJointStates(self, request, context):  # type: ignore[no-untyped-def]
+        return await self._unary("GetJointStates", request, context)
+
+    async def GetStatus(self, request, context):  # type: ignore[no-untyped-def]
+        return await self._unary("GetStatus", request, context)
+
+    async def MoveJoints(self, request, context):  # type: ignore[no-untyped-def]
+        return await self._unary("MoveJoints", request, context)
+
+    async def ExecuteTrajectory(self, request, context):  # type: ignore[no-untyped-def]
+        return await self._unary("ExecuteTrajectory", request, context)
+
+    async def ExecuteGrasp(self, request, context):  # type: ignore[no-untyped-def]
+        return await self._unary("ExecuteGrasp", request, context)
+
+    async def SetGripper(self, request, context):  # type: ignore[no-untyped-def]
+        return await self._unary("SetGripper", request, context)
+
+    async def Stop(self, request, context):  # type: ignore[no-untyped-def]
+        return await self._unary("Stop", request, context)
+
+    async def EmergencyStop(self, request, context):  # type: ignore[no-untyped-def]
+        if not request.release:
+            self._cell.metrics.estop.labels(self._cell.robot_id, "grpc").inc()
+        return await self._unary("EmergencyStop", request, context, estop=True)
+
+    async def ClearError(self, request, context):  # type: ignore[no-untyped-def]
+        return await self._unary("ClearError", request, context)
+
+    async def Enable(self, request, context):  # type: ignore[no-untyped-def]
+        return await self._unary("Enable", request, context)
+
+    async def Disable(self, request, context):  # type: ignore[no-untyped-def]
+        return await self._unary("Disable", request, context)
+
+    async def StreamJointStates(self, request, context):  # type: ignore[no-untyped-def]
+        assert self._cell.clients.robot is not None
+        call = self._cell.clients.robot.StreamJointStates(request)
+        try:
+            async for msg in call:
+                yield msg
+        except grpc.aio.AioRpcError as exc:
+            await _passthrough(context, exc)
+        finally:
+            call.cancel()
+
+
+class CellMetricsServicer(gateway_pb2_grpc.CellMetricsServicer):
+    def __init__(self, cell: Cell, status: Callable[[], Awaitable[str]]):
+        self._cell = cell
+        self._status = status
+
+    async def StreamMetrics(self, request, context):  # type: ignore[no-untyped-def]
+        period = max(request.period_s or 1.0, 0.1)
+        seq = 0
+        while True:
+            seq += 1
+            sample = gateway_pb2.MetricsSample(
+                header=common_pb2.Header(stamp_ns=time.time_ns(), seq=seq), state=await self._status(),
+                database_ok=self._cell.writer.database_ok,
+            )
+            try:
+                async with self._cell.sessions() as s:
+                    summary = await PickRepository(s).summary(datetime.now(UTC))
+                sample.cycle_time = summary.avg_cycle_time_s or 0.0
+                sample.success_rate = summary.success_rate or 0.0
+                sample.picks_today = summary.picks_today
+                sample.picks_total = summary.total
+            except Exception as exc:  # the stream goes on; database_ok tells the client
+                log.debug("metrics sample without database: %s", exc)
+                sample.database_ok = False
+            yield sample
+            await asyncio.sleep(period)
+
+
+async def start_edge(cell: Cell, host: str, port: int, token: str) -> tuple[grpc.aio.Server, int]:
+    """Build, bind and start the edge server; returns it and the bound port (0 = any free)."""
+    from gateway.routers.system import cell_state
+
+    async def state() -> str:
+        return cell_state(cell)
+
+    server = grpc_util.create_server([TokenAuthInterceptor(token)])
+    robot_pb2_grpc.add_RobotControllerServicer_to_server(RobotControllerRelay(cell), server)
+    gateway_pb2_grpc.add_CellMetricsServicer_to_server(CellMetricsServicer(cell, state), server)
+    bound = grpc_util.bind(server, host, port)
+    await server.start()
+    log.info("gRPC edge (RobotController, CellMetrics) on %s:%d", host, bound)
+    return server, bound

@@ -1,0 +1,145 @@
+"""The latest cell state, and its fan-out to browser connections.
+
+Everything runs on the event loop (the Zenoh adapter hands samples over thread-safely).
+Each connection has a bounded queue; a slow browser loses old state messages (the newest
+matters), never blocks the others. Joint states are decimated to ``joint_rate_hz`` here.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import time
+from collections.abc import Iterator
+from typing import Any
+
+from pickplace.v1 import common_pb2, robot_pb2, task_pb2
+
+from gateway.convert import message_dict
+
+CLIENT_QUEUE = 64
+
+Message = dict[str, Any]
+
+
+def joint_state_json(msg: common_pb2.JointState) -> Message:
+    p = msg.tcp_pose
+    return {
+        "stamp_ns": msg.header.stamp_ns,
+        "seq": msg.header.seq,
+        "name": list(msg.name),
+        "position": [round(q, 6) for q in msg.position],
+        "velocity": [round(v, 5) for v in msg.velocity],
+        "robot_mode": msg.robot_mode,
+        "tcp": [round(v, 5) for v in (p.x, p.y, p.z, p.qx, p.qy, p.qz, p.qw)],
+    }
+
+
+def robot_status_json(st: robot_pb2.RobotStatus) -> Message:
+    return {
+        "robot_mode": st.robot_mode,
+        "robot_mode_name": st.robot_mode_name,
+        "enabled": st.enabled,
+        "connected": st.connected,
+        "alarms": list(st.alarms),
+        "gripper_closed": st.gripper_closed,
+        "estop_active": st.estop_active,
+        "robot_model": st.robot_model,
+    }
+
+
+class LiveHub:
+    def __init__(self, joint_rate_hz: float = 20.0):
+        self._min_joint_interval_ns = int(1e9 / joint_rate_hz)
+        self._next_joint_ns = 0
+        self._queues: set[asyncio.Queue[Message]] = set()
+        self.task_status: Message | None = None
+        self.joint_state: Message | None = None
+        self.robot_status: Message | None = None
+        self.robot_status_at: float = 0.0
+        self.camera_jpeg: bytes | None = None
+        self.camera_seq = 0
+        self.sent = 0
+
+    def set_joint_rate(self, rate_hz: float) -> None:
+        self._min_joint_interval_ns = int(1e9 / rate_hz)
+
+    # ----------------------------------------------------------------- inputs
+    def on_task_status(self, msg: task_pb2.TaskStatus) -> None:
+        self.task_status = message_dict(msg)
+        self._broadcast({"type": "task_status", "data": self.task_status})
+
+    def on_joint_state(self, msg: common_pb2.JointState) -> bool:
+        """Keep and forward at most ``joint_rate_hz`` states per second; True when forwarded."""
+        stamp = msg.header.stamp_ns or time.time_ns()
+        if stamp < self._next_joint_ns:
+            return False
+        # Keep a fixed schedule, so 125 Hz in gives the full rate out (a minimum gap would give 17.9 Hz);
+        # after a pause in the stream, start the schedule again from this sample.
+        on_schedule = stamp - self._next_joint_ns < self._min_joint_interval_ns
+        self._next_joint_ns = (self._next_joint_ns if on_schedule else stamp) + self._min_joint_interval_ns
+        self.joint_state = joint_state_json(msg)
+        self._broadcast({"type": "joint_state", "data": self.joint_state})
+        return True
+
+    def on_robot_status(
+        self, st: robot_pb2.RobotStatus | None, error: str | None = None, asked_at: float | None = None
+    ) -> None:
+        """``asked_at`` (monotonic) is when the status was requested: an answer to an older request
+        than the one already shown (a poll overtaken by the e-stop's refresh) is ignored."""
+        asked = time.monotonic() if asked_at is None else asked_at
+        if asked < self.robot_status_at:
+            return
+        data = robot_status_json(st) if st is not None else {"connected": False, "error": error}
+        self.robot_status_at = asked
+        if data != self.robot_status:
+            self.robot_status = data
+            self._broadcast({"type": "robot_status", "data": data})
+
+    def on_picks(self, picks: list[Message]) -> None:
+        self._broadcast({"type": "picks", "data": picks})
+
+    def on_camera(self, jpeg: bytes) -> None:
+        self.camera_jpeg = jpeg
+        self.camera_seq += 1
+        self._broadcast({"type": "camera", "data": {"seq": self.camera_seq, "bytes": len(jpeg)}})
+
+    def on_event(self, kind: str, data: Message) -> None:
+        """Anything else worth showing (e-stop pressed, config changed)."""
+        self._broadcast({"type": kind, "data": data})
+
+    # ----------------------------------------------------------------- outputs
+    def snapshot(self) -> list[Message]:
+        out: list[Message] = []
+        if self.task_status is not None:
+            out.append({"type": "task_status", "data": self.task_status})
+        if self.robot_status is not None:
+            out.append({"type": "robot_status", "data": self.robot_status})
+        if self.joint_state is not None:
+            out.append({"type": "joint_state", "data": self.joint_state})
+        if self.camera_jpeg is not None:
+            out.append({"type": "camera", "data": {"seq": self.camera_seq, "bytes": len(self.camera_jpeg)}})
+        return out
+
+    @contextlib.contextmanager
+    def connection(self) -> Iterator[asyncio.Queue[Message]]:
+        q: asyncio.Queue[Message] = asyncio.Queue(CLIENT_QUEUE)
+        for m in self.snapshot():
+            q.put_nowait(m)
+        self._queues.add(q)
+        try:
+            yield q
+        finally:
+            self._queues.discard(q)
+
+    @property
+    def connections(self) -> int:
+        return len(self._queues)
+
+    def _broadcast(self, message: Message) -> None:
+        for q in list(self._queues):
+            if q.full():
+                with contextlib.suppress(asyncio.QueueEmpty):
+                    q.get_nowait()
+            q.put_nowait(message)
+            self.sent += 1

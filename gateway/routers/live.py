@@ -1,0 +1,68 @@
+"""Live updates for the dashboard (WebSocket), the latest camera image, the robot's URDF."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+
+from fastapi import APIRouter, HTTPException, Response, WebSocket, WebSocketDisconnect
+from fastapi.responses import PlainTextResponse
+
+from gateway.deps import CellDep
+from services.common.settings import CONFIG_DIR
+
+router = APIRouter(tags=["live"])
+
+PING_INTERVAL_S = 15.0
+
+
+@router.websocket("/live")
+async def live(ws: WebSocket) -> None:
+    """Messages ``{"type": "task_status"|"joint_state"|"robot_status"|"picks"|"camera"|"estop"|…, "data": …}``.
+
+    The current state first, then every change; joint states at ``gateway.joint_state_rate_hz``.
+    """
+    cell = ws.app.state.cell
+    await ws.accept()
+    with cell.hub.connection() as queue:
+        reader = asyncio.create_task(_drain_client(ws))
+        try:
+            while not reader.done():
+                try:
+                    async with asyncio.timeout(PING_INTERVAL_S):
+                        msg = await queue.get()
+                except TimeoutError:
+                    msg = {"type": "ping", "data": {}}
+                await ws.send_text(json.dumps(msg, separators=(",", ":")))
+        except (WebSocketDisconnect, RuntimeError):
+            pass
+        finally:
+            reader.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await reader
+
+
+async def _drain_client(ws: WebSocket) -> None:
+    """The browser sends nothing we need; reading notices when it goes away."""
+    with contextlib.suppress(WebSocketDisconnect, RuntimeError):
+        while True:
+            await ws.receive_text()
+
+
+@router.get("/camera/latest.jpg", responses={200: {"content": {"image/jpeg": {}}}})
+async def camera(cell: CellDep) -> Response:
+    """The vision service's latest debug image (detections drawn on it)."""
+    if cell.hub.camera_jpeg is None:
+        raise HTTPException(404, "no camera image received yet (vision service not publishing)")
+    return Response(cell.hub.camera_jpeg, media_type="image/jpeg", headers={"Cache-Control": "no-store"})
+
+
+@router.get("/robot/urdf", response_class=PlainTextResponse)
+async def robot_urdf(cell: CellDep) -> PlainTextResponse:
+    """The URDF of the configured robot model, for the dashboard's 3D view."""
+    model = cell.settings.robot.model
+    path = CONFIG_DIR / "robots" / f"{model}.urdf"
+    if not path.exists():
+        raise HTTPException(404, f"no URDF for robot model {model!r} at {path}")
+    return PlainTextResponse(path.read_text(), media_type="application/xml")
