@@ -1,0 +1,231 @@
+"""Gateway figures: requests/s and p50/p99 latency of GET /system/status and GET /picks with 100k picks
+in PostgreSQL, and e-stop latency (REST request → EmergencyStop received by the simulated Dobot).
+
+The gateway runs as its own process (``pickplace serve gateway``, as deployed); the load generator,
+the robot-driver service and the simulated Dobot run in this one. Everything on 127.0.0.1; the
+PostgreSQL schema is created for the run and dropped after it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import subprocess
+import sys
+import tempfile
+import time
+import uuid
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
+
+import httpx
+import numpy as np
+
+from gateway.db import migrate
+from gateway.db.engine import make_engine
+from gateway.db.models import Pick
+from services.common.net import free_loopback_port
+from services.common.settings import REPO_ROOT, DatabaseSettings, load_settings
+
+PG_URL = os.environ.get("PICKPLACE_TEST_POSTGRES_URL", "postgresql+asyncpg://postgres@127.0.0.1:5432/test")
+ROWS = 100_000
+TOKEN = "bench-token-0123456789abcdef"
+CONCURRENCY = 16
+REQUESTS = 1000
+ESTOPS = 200
+
+
+
+
+def _pct(ms: list[float]) -> str:
+    a = np.asarray(ms)
+    return f"p50 {np.percentile(a, 50):.2f} ms, p99 {np.percentile(a, 99):.2f} ms (n={a.size})"
+
+
+async def _fill(db: DatabaseSettings) -> float:
+    engine = make_engine(db, db.url)
+    t0 = time.perf_counter()
+    try:
+        await migrate.upgrade(engine, db)
+        rng = np.random.default_rng(0)
+        start = datetime.now(UTC) - timedelta(days=30)
+        async with engine.begin() as conn:
+            for base in range(0, ROWS, 10_000):
+                rows = []
+                for i in range(base, base + 10_000):
+                    ok = bool(rng.random() < 0.93)
+                    rows.append({
+                        "pick_id": uuid.UUID(int=int(rng.integers(0, 2**63)) << 64 | i).hex,
+                        "timestamp": start + timedelta(seconds=26 * i),
+                        "robot_id": "robot_01", "object_class": "rod" if i % 3 else "cube_red",
+                        "pick_pose": {"x": 0.45, "y": 0.0, "z": 0.02, "qx": 0, "qy": 0, "qz": 0, "qw": 1},
+                        "place_pose": None, "grasp_quality": float(rng.uniform(0.5, 1)),
+                        "cycle_time": float(rng.normal(9, 1)), "success": ok,
+                        "error_code": None if ok else "GraspFailureError",
+                        "error_message": None if ok else "object slipped", "task": "stand-rod",
+                        "stage_reached": "DONE" if ok else "LIFT", "stage_durations": {"PLAN": 0.5}, "attempts": 1,
+                    })
+                await conn.execute(Pick.__table__.insert(), rows)
+        async with engine.connect() as conn:  # what autovacuum would do soon after such a load
+            await conn.execution_options(isolation_level="AUTOCOMMIT")
+            await conn.exec_driver_sql("ANALYZE picks")
+    finally:
+        await engine.dispose()
+    return time.perf_counter() - t0
+
+
+def _start_gateway(db: DatabaseSettings, port: int, robot_port: int, tmp: Path) -> subprocess.Popen[bytes]:
+    env = {
+        **os.environ,
+        "PICKPLACE_GATEWAY__API_TOKEN": TOKEN,
+        "PICKPLACE_GATEWAY__PORT": str(port),
+        "PICKPLACE_GATEWAY__EDGE_GRPC_PORT": str(free_loopback_port()),
+        "PICKPLACE_GATEWAY__PICK_SPILL_FILE": str(tmp / "spill.jsonl"),
+        "PICKPLACE_GATEWAY__HEALTH_PERIOD_S": "60",
+        "PICKPLACE_DATABASE__URL": db.url,
+        "PICKPLACE_DATABASE__SCHEMA_NAME": db.schema_name or "",
+        "PICKPLACE_GRPC__ROBOT_PORT": str(robot_port),
+        "PICKPLACE_GRPC__TASK_PORT": str(free_loopback_port()),
+        "PICKPLACE_ZENOH__LISTEN": f'["tcp/127.0.0.1:{free_loopback_port()}"]',
+        "PICKPLACE_LOGGING__FILE": str(tmp / "gateway.log"),
+        "PICKPLACE_LOGGING__LEVEL": "WARNING",
+    }
+    env.pop("DATABASE_URL", None)
+    return subprocess.Popen([sys.executable, "-m", "services.cli", "serve", "gateway"], cwd=REPO_ROOT, env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+
+
+async def _wait_up(url: str, proc: subprocess.Popen[bytes]) -> None:
+    async with httpx.AsyncClient() as c:
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:
+            if proc.poll() is not None:
+                raise RuntimeError(f"gateway exited: {proc.stderr.read().decode()[-2000:] if proc.stderr else ''}")
+            try:
+                if (await c.get(url + "/api/v1/system/status")).status_code == 200:
+                    return
+            except httpx.TransportError:
+                pass
+            await asyncio.sleep(0.1)
+    raise RuntimeError("gateway did not come up in 30 s")
+
+
+async def _load(url: str, path: str) -> tuple[float, list[float]]:
+    lat: list[float] = []
+    todo = iter(range(REQUESTS))
+    limits = httpx.Limits(max_connections=CONCURRENCY, max_keepalive_connections=CONCURRENCY)
+    async with httpx.AsyncClient(base_url=url, limits=limits, timeout=30) as c:
+        for _ in range(50):
+            (await c.get(path)).raise_for_status()
+
+        async def worker() -> None:
+            for _ in todo:
+                t0 = time.perf_counter()
+                r = await c.get(path)
+                lat.append((time.perf_counter() - t0) * 1e3)
+                r.raise_for_status()
+
+        t0 = time.perf_counter()
+        await asyncio.gather(*(worker() for _ in range(CONCURRENCY)))
+        return REQUESTS / (time.perf_counter() - t0), lat
+
+
+async def _run() -> None:
+    import asyncpg
+
+    from services.common.bus import Bus
+    from services.robot.service import RobotService
+    from services.sim.app import build_sim_server
+
+    schema = f"gw_bench_{uuid.uuid4().hex[:10]}"
+    dsn = PG_URL.replace("postgresql+asyncpg://", "postgresql://")
+    admin = await asyncpg.connect(dsn, timeout=5)
+    await admin.execute(f'CREATE SCHEMA "{schema}"')
+    try:
+        db = DatabaseSettings(url=PG_URL, schema_name=schema)
+        print(f"filled {ROWS} picks into PostgreSQL in {await _fill(db):.1f}s")
+        with tempfile.TemporaryDirectory() as tmp:
+            # 1. read load: the gateway alone (no robot driver to poll), the client in this process
+            port = free_loopback_port()
+            proc = _start_gateway(db, port, free_loopback_port(), Path(tmp))
+            try:
+                url = f"http://127.0.0.1:{port}"
+                await _wait_up(url, proc)
+                for path in ("/api/v1/system/status", "/api/v1/picks?limit=100&offset=0",
+                             "/api/v1/picks?limit=100&offset=50000", "/api/v1/metrics"):
+                    rps, lat = await _load(url, path)
+                    print(f"GET {path}: {rps:6.0f} req/s, {_pct(lat)} ({CONCURRENCY} concurrent)")
+                cpu = _cpu_seconds(proc.pid)
+                if cpu is not None:
+                    print(f"gateway process CPU over the read load: {cpu:.1f} s for {4 * (REQUESTS + 50)} requests")
+            finally:
+                proc.terminate()
+                proc.wait(timeout=15)
+            # 2. e-stop through the real robot driver to the simulated Dobot
+            s = load_settings("sim", overrides={"logging": {"file": None}, "grpc": {"robot_port": 0},
+                                                "zenoh": {"listen": [f"tcp/127.0.0.1:{free_loopback_port()}"]}})
+            async with build_sim_server(s, "kinematic", ports={"dashboard": 0, "feedback": 0, "slow": 0}) as sim:
+                r = s.robot.model_copy(update={"dashboard_port": sim.ports["dashboard"],
+                                               "feedback_port": sim.ports["feedback"]})
+                s = s.model_copy(update={"robot": r})
+                async with Bus(s.zenoh) as bus, RobotService(s, bus, grpc_port=0) as robot:
+                    await robot.driver.enable()
+                    port = free_loopback_port()
+                    proc = _start_gateway(db, port, robot.grpc_port, Path(tmp))
+                    try:
+                        url = f"http://127.0.0.1:{port}"
+                        await _wait_up(url, proc)
+                        await _estop(url, sim, robot)
+                    finally:
+                        proc.terminate()
+                        proc.wait(timeout=15)
+    finally:
+        await admin.execute(f'DROP SCHEMA IF EXISTS "{schema}" CASCADE')
+        await admin.close()
+
+
+async def _estop(url: str, sim, robot) -> None:  # type: ignore[no-untyped-def]
+    """REST request sent → EmergencyStop(…) parsed by the simulated controller."""
+    received: list[float] = []
+    original = sim.controller.handle
+
+    def handle(text: str) -> str:
+        if text.startswith("EmergencyStop(") and not text.startswith("EmergencyStop(0"):
+            received.append(time.perf_counter())
+        return original(text)
+
+    sim.controller.handle = handle
+    lat: list[float] = []
+    try:
+        async with httpx.AsyncClient(base_url=url, headers={"Authorization": f"Bearer {TOKEN}"}) as c:
+            for i in range(ESTOPS + 10):
+                n = len(received)
+                t0 = time.perf_counter()
+                r = await c.post("/api/v1/system/estop")
+                r.raise_for_status()
+                if len(received) != n + 1:
+                    raise RuntimeError(f"e-stop {i} not seen by the simulated controller")
+                if i >= 10:  # warm-up
+                    lat.append((received[-1] - t0) * 1e3)
+                await robot.driver.emergency_stop(release=True)
+    finally:
+        sim.controller.handle = original
+    print(f"e-stop, REST request → EmergencyStop at the simulated Dobot: {_pct(lat)}")
+
+
+def _cpu_seconds(pid: int) -> float | None:
+    try:
+        import psutil
+
+        t = psutil.Process(pid).cpu_times()
+        return float(t.user + t.system)
+    except Exception:
+        return None
+
+
+def main() -> None:
+    asyncio.run(_run())
+
+
+if __name__ == "__main__":
+    main()

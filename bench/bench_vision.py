@@ -1,0 +1,140 @@
+"""Vision benchmark: ms per frame of the rod and cube pipelines at 640×480 and 1280×720, and accuracy.
+
+Frames come from the seeded synthetic renderer (D435i-like noise, holes on the
+rod, flying pixels) and are rendered before timing; each pipeline runs on every
+frame several times. Targets (issue 5): rod ≤ 10 ms, cubes ≤ 20 ms at 640×480.
+Run: ``python -m bench.bench_vision`` (or ``python -m bench``).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from services.common.settings import VisionSettings
+from services.vision.pipeline import VisionPipeline
+from services.vision.synthetic import NoiseModel, d435_intrinsics, random_scene, render_scene
+
+N_SCENES = 12
+REPEATS = 5
+N_ACCURACY = 40
+N_TWIN = 8
+
+
+def _scenes(width: int, height: int, n: int, seed0: int = 1000) -> list:
+    intr = d435_intrinsics(width, height)
+    out = []
+    for k in range(n):
+        seed = seed0 + k
+        scene = random_scene(seed, n_rods=1, cube_colors=("red", "green", "blue", "black"), obstacle=True,
+                             dark_mat=k % 3 == 0, intrinsics=intr)
+        out.append((scene, render_scene(scene, NoiseModel(), seed=seed).frame))
+    return out
+
+
+def _time(pipe: VisionPipeline, frames: list) -> np.ndarray:
+    for scene, frame in frames[:2]:  # warm caches (ray grids, imports)
+        pipe.detect(frame, scene.T_base_camera)
+    ms = []
+    for _ in range(REPEATS):
+        for scene, frame in frames:
+            t0 = time.perf_counter()
+            pipe.detect(frame, scene.T_base_camera)
+            ms.append((time.perf_counter() - t0) * 1e3)
+    return np.array(ms)
+
+
+def _accuracy() -> dict[str, float]:
+    pipe = VisionPipeline()
+    rod_c, rod_a, cube_c, colour_ok, n_cubes, box_ok, n_boxes = [], [], [], 0, 0, 0, 0
+    for k in range(N_ACCURACY):
+        seed = 5000 + k
+        scene = random_scene(seed, n_rods=1, cube_colors=("red", "green", "blue", "black"), obstacle=k % 2 == 0,
+                             dark_mat=k % 3 == 0)
+        res = pipe.detect(render_scene(scene, NoiseModel(), seed=seed).frame, scene.T_base_camera)
+        truth = scene.rods[0]
+        if res.rods:
+            rod_c.append(np.linalg.norm(res.rods[0].center_base - np.asarray(truth.center)))
+            rod_a.append(np.degrees(np.arccos(min(1.0, abs(res.rods[0].axis_base @ truth.axis)))))
+        for cube in scene.cubes:
+            n_cubes += 1
+            d = [np.linalg.norm(c.centroid_base - np.asarray(cube.center)) for c in res.cubes]
+            if d and min(d) < 0.02:
+                cube_c.append(min(d))
+                colour_ok += res.cubes[int(np.argmin(d))].color_label == cube.color
+        for ob in scene.obstacles:
+            n_boxes += 1
+            box_ok += any(bool(np.all(b.contains(ob.corners()))) for b in res.obstacles)
+    return {
+        "rods_found": len(rod_c) / N_ACCURACY,
+        "rod_centre_median_mm": float(np.median(rod_c) * 1e3), "rod_centre_max_mm": float(np.max(rod_c) * 1e3),
+        "rod_axis_median_deg": float(np.median(rod_a)), "rod_axis_max_deg": float(np.max(rod_a)),
+        "cubes_found": len(cube_c) / n_cubes, "colour_correct": colour_ok / n_cubes,
+        "cube_centre_median_mm": float(np.median(cube_c) * 1e3), "cube_centre_max_mm": float(np.max(cube_c) * 1e3),
+        "obstacle_boxes_containing": box_ok / max(n_boxes, 1),
+    }
+
+
+def _twin_accuracy() -> str:
+    """The same scoring on the physics twin's rendered scenes (MuJoCo, its own noise model)."""
+    import os
+    import tempfile
+
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    try:
+        from services.common.settings import load_settings
+        from services.sim.twin.dataset import load_sim_scene, write_sim_scene
+    except ImportError as exc:  # the twin is optional for this benchmark
+        return f"twin scenes: skipped ({exc})"
+    settings = load_settings("sim")
+    pipe = VisionPipeline(settings.vision)
+    rod_c, rod_a, cube_c, colour_ok, n_cubes = [], [], [], 0, 0
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in range(N_TWIN):
+            write_sim_scene(seed, f"{tmp}/{seed}", settings, noise=True)
+            rec = load_sim_scene(f"{tmp}/{seed}")
+            T = np.asarray(rec.truth["T_base_camera"])
+            res = pipe.detect(rec.frames[0], T)
+            for obj in rec.truth["objects"]:
+                T_obj = np.asarray(obj["T_base_object"])
+                if obj["kind"] == "rod" and res.rods:
+                    rod_c.append(np.linalg.norm(res.rods[0].center_base - T_obj[:3, 3]))
+                    rod_a.append(np.degrees(np.arccos(min(1.0, abs(res.rods[0].axis_base @ T_obj[:3, 2])))))
+                elif obj["kind"] == "cube":
+                    n_cubes += 1
+                    d = [np.linalg.norm(c.centroid_base - T_obj[:3, 3]) for c in res.cubes]
+                    if d and min(d) < 0.02:
+                        cube_c.append(min(d))
+                        colour_ok += res.cubes[int(np.argmin(d))].color_label == obj["color"]
+    if not rod_c or not cube_c:
+        return f"twin scenes: rods found {len(rod_c)}/{N_TWIN}, cubes found {len(cube_c)}/{n_cubes}"
+    return (f"twin scenes ({N_TWIN}, MuJoCo render + twin noise): rod centre max {max(rod_c) * 1e3:.2f} mm, "
+            f"axis max {max(rod_a):.2f}°; cubes found {len(cube_c)}/{n_cubes}, colour right {colour_ok}/{n_cubes}, "
+            f"centre max {max(cube_c) * 1e3:.2f} mm")
+
+
+def main() -> None:
+    rod_only = VisionPipeline(VisionSettings(detect_cubes=False))
+    cubes_only = VisionPipeline(VisionSettings(detect_rods=False))
+    print("vision pipelines, ms per frame (table plane included; rendering excluded)")
+    print(f"{'resolution':>11} {'pipeline':>8} {'median':>8} {'p95':>8} {'target':>8}")
+    for width, height in ((640, 480), (1280, 720)):
+        frames = _scenes(width, height, N_SCENES)
+        for name, pipe, target in (("rod", rod_only, 10.0), ("cubes", cubes_only, 20.0)):
+            ms = _time(pipe, frames)
+            tgt = f"{target:.0f}" if width == 640 else "-"
+            print(f"{width}x{height:<5} {name:>8} {np.median(ms):8.2f} {np.percentile(ms, 95):8.2f} {tgt:>8}")
+    acc = _accuracy()
+    print(f"accuracy over {N_ACCURACY} noisy scenes (0.5-0.9 m, holes on the rod, 1/3 on a black mat):")
+    print(f"  rod: found {acc['rods_found']:.0%}, centre median {acc['rod_centre_median_mm']:.2f} mm / "
+          f"max {acc['rod_centre_max_mm']:.2f} mm, axis median {acc['rod_axis_median_deg']:.2f}° / "
+          f"max {acc['rod_axis_max_deg']:.2f}°")
+    print(f"  cubes: found {acc['cubes_found']:.0%}, colour right {acc['colour_correct']:.0%}, centre median "
+          f"{acc['cube_centre_median_mm']:.2f} mm / max {acc['cube_centre_max_mm']:.2f} mm")
+    print(f"  obstacle box contains the obstacle: {acc['obstacle_boxes_containing']:.0%}")
+    print(_twin_accuracy())
+
+
+if __name__ == "__main__":
+    main()
