@@ -195,13 +195,15 @@ class Kinematics:
     def manipulability(self, q: ArrayLike) -> float:
         """Yoshikawa's measure sqrt(det(J Jᵀ)) of the flange Jacobian (0 at a singularity).
 
-        The flange is used so that the value does not depend on the tool offset.
+        The flange is used so that the value does not depend on the tool offset. Computed as the
+        product of J's singular values, which stays accurate near a singularity where det(J Jᵀ) is
+        rounding noise.
         """
         qv = joint_vector(q, self.dof)
         J = pin.computeFrameJacobian(
             self.model, self.data, qv, self.arm.flange_frame, pin.LOCAL_WORLD_ALIGNED
         )
-        return float(math.sqrt(max(np.linalg.det(J @ J.T), 0.0)))
+        return float(np.prod(np.linalg.svd(J, compute_uv=False)))
 
     def pose_error(self, q: ArrayLike, T_base_tool: Array) -> tuple[float, float]:
         """(position error m, rotation error rad) of the tool at q against a target."""

@@ -66,7 +66,6 @@ async def test_websocket_streams_decimated_joints_status_and_picks(robot_setting
     assert min(gaps_ms) > 25.0, gaps_ms
     assert 45.0 <= statistics.median(gaps_ms) <= 60.0, gaps_ms
     assert len(stamps) <= (stamps[-1] - stamps[0]) / 50e6 + 1
-    assert len(joints) <= 20 * elapsed + 2
     assert joints[-1]["name"][0] == "joint1" and abs(joints[-1]["position"][2] - 1.5707963) < 1e-5
     assert others["task_status"][-1]["state"] == "PLAN"
     got = [p for batch in others["picks"] for p in batch]

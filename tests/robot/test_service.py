@@ -1,7 +1,8 @@
 """The robot-driver service over real gRPC and Zenoh on loopback."""
 
 import asyncio
-import time
+import itertools
+import statistics
 
 import grpc
 import numpy as np
@@ -32,31 +33,29 @@ async def stub(service):  # type: ignore[no-untyped-def]
 
 
 async def test_stream_joint_states_rate(stub):
+    # Every feedback packet (125 Hz from the simulator) is forwarded: judged by the driver's sequence
+    # numbers and the states' own stamps, not by the wall clock, which a loaded machine stretches.
     stream = stub.StreamJointStates(robot_pb2.StreamJointStatesRequest())
     first = await stream.read()
-    t0 = time.perf_counter()
-    n = 0
-    seqs = [first.header.seq]
-    while time.perf_counter() - t0 < 1.0:
-        msg = await stream.read()
-        seqs.append(msg.header.seq)
-        n += 1
+    msgs = [first]
+    while msgs[-1].header.stamp_ns - first.header.stamp_ns < 1_000_000_000:
+        msgs.append(await stream.read())
     stream.cancel()
-    rate = n / (time.perf_counter() - t0)
-    assert rate >= 120, f"only {rate:.1f} joint states/s"
-    assert seqs == sorted(seqs) and len(first.position) == 6
+    seqs = [m.header.seq for m in msgs]
+    assert all(b > a for a, b in itertools.pairwise(seqs)), "out of order"
+    assert len(msgs) >= 0.9 * (seqs[-1] - seqs[0] + 1), f"{len(msgs)} of {seqs[-1] - seqs[0] + 1} forwarded"
+    assert len(msgs) >= 30, f"only {len(msgs)} joint states in 1 s of feedback"
+    assert len(first.position) == 6
     assert list(first.name) == ["joint1", "joint2", "joint3", "joint4", "joint5", "joint6"]
 
 
 async def test_stream_rate_limit(stub):
     stream = stub.StreamJointStates(robot_pb2.StreamJointStatesRequest(max_rate_hz=10))
-    t0 = time.perf_counter()
-    n = 0
-    while time.perf_counter() - t0 < 1.0:
-        await stream.read()
-        n += 1
+    stamps = [(await stream.read()).header.stamp_ns for _ in range(8)]
     stream.cancel()
-    assert 5 <= n <= 13
+    gaps_ms = [(b - a) / 1e6 for a, b in itertools.pairwise(stamps)]
+    assert min(gaps_ms) >= 100.0, gaps_ms  # never faster than asked
+    assert statistics.median(gaps_ms) < 150.0, gaps_ms  # the first state due, not a slower rate
 
 
 async def test_second_zenoh_session_receives_joint_states(service, robot_settings):
