@@ -7,11 +7,18 @@ from collections.abc import AsyncIterator
 
 import numpy as np
 import pytest
+from hypothesis import settings as hypothesis_settings
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 from services.common.net import free_loopback_port as free_port
 from services.common.settings import Settings, load_settings
+
+# Property tests draw the same examples on every run, so a red CI run is reproducible and a
+# green one is not luck; HYPOTHESIS_PROFILE=explore draws new ones (and keeps what it finds).
+hypothesis_settings.register_profile("repeatable", derandomize=True, database=None)
+hypothesis_settings.register_profile("explore", derandomize=False)
+hypothesis_settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "repeatable"))
 
 
 @pytest.fixture

@@ -34,7 +34,7 @@ from services.common.errors import (
 from services.motion.cartesian import cartesian_path
 from services.motion.collision import CollisionChecker, Scene
 from services.motion.kinematics import ArmModel, Kinematics, check_pose, pose_text
-from services.motion.sampling import PLANNERS, plan_path
+from services.motion.sampling import PLANNERS, plan_path, seed_planning
 from services.motion.timing import time_parameterize
 from services.motion.trajectory import (
     Array,
@@ -65,6 +65,9 @@ class PlannerConfig:
     # before spline timing, polyline segments are split to at most this joint step so the
     # spline through them hugs the checked path
     spline_segment_rad: float = 0.25
+    # OMPL's random seeds come from this one, so a process plans the same way on every run
+    # (settings motion.seed); only the process's first planner sets it (OMPL's rule)
+    seed: int = 0
 
     def __post_init__(self) -> None:
         if self.planner not in PLANNERS:
@@ -101,6 +104,7 @@ class PlannerConfig:
             cartesian_step_rad=math.radians(m.cartesian_step_deg),  # type: ignore[attr-defined]
             jump_threshold_rad=math.radians(m.jump_threshold_deg),  # type: ignore[attr-defined]
             min_manipulability=m.min_manipulability,  # type: ignore[attr-defined]
+            seed=m.seed,  # type: ignore[attr-defined]
         )
 
 
@@ -152,6 +156,7 @@ class MotionPlanner:
     def __init__(self, arm: ArmModel, scene: Scene | None = None, config: PlannerConfig | None = None):
         self.arm = arm
         self.config = config or PlannerConfig()
+        seed_planning(self.config.seed)
         self.scene = scene or Scene()
         self.kin = Kinematics(arm)
         self.checker = CollisionChecker(arm, self.scene)

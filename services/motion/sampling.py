@@ -44,6 +44,20 @@ PLANNERS: dict[str, Callable[[ob.SpaceInformation], ob.Planner]] = {
 }
 
 ou.setLogLevel(ou.LOG_WARN)
+_planning_seed: int | None = None
+
+
+def seed_planning(seed: int) -> int:
+    """Seed OMPL's random numbers for this process, so plans repeat from run to run; returns the seed
+    in effect. OMPL takes a seed only before its first random number, so the first call wins and
+    later ones (another planner, another seed) leave it as it is."""
+    global _planning_seed
+    if _planning_seed is None:
+        if seed < 0:
+            raise InvalidInputError(f"planning seed must be >= 0, got {seed}")
+        ou.RNG.setSeed(seed % (2**32 - 1) + 1)  # OMPL ignores a seed of 0
+        _planning_seed = seed
+    return _planning_seed
 
 
 def sampling_bounds(

@@ -187,6 +187,37 @@ class JointTrajectory:
         c5 = (12 * d - 6 * (v1 + v0) * h + (a1 - a0) * h**2) / (2 * h**5)
         return np.stack([p0, v0, a0 / 2, c3, c4, c5], axis=1)
 
+    def acceleration_peaks(self) -> tuple[Array, Array]:
+        """The largest |acceleration| inside each knot interval, exactly, and when: ((N-1, dof), (N-1, dof)).
+
+        Acceleration on a quintic segment is a cubic in τ; its extremes inside the interval are
+        where the jerk (a quadratic) is zero. Sampling alone can miss them by a few 0.1 % where a
+        bang-bang profile switches between knots.
+        """
+        h = np.diff(self.times)[:, None]
+        c = self._coefficients
+        c2, c3, c4, c5 = c[:, 2], c[:, 3], c[:, 4], c[:, 5]
+        # jerk(τ) = 6 c3 + 24 c4 τ + 60 c5 τ²: roots of A τ² + B τ + C
+        A, B, C = 60 * c5, 24 * c4, 6 * c3
+        best = np.zeros_like(c2)
+        at = np.zeros_like(c2)
+        disc = B * B - 4 * A * C
+        with np.errstate(divide="ignore", invalid="ignore"):
+            root = np.sqrt(np.maximum(disc, 0.0))
+            quadratic = np.abs(A) > 1e-12
+            candidates = (
+                np.where(quadratic, (-B + root) / (2 * A), np.where(np.abs(B) > 1e-12, -C / B, -1.0)),
+                np.where(quadratic, (-B - root) / (2 * A), -1.0),
+            )
+        for tau in candidates:
+            valid = (disc >= 0) & np.isfinite(tau) & (tau > 0) & (tau < h)
+            tau = np.where(valid, tau, 0.0)
+            acc = np.abs(2 * c2 + tau * (6 * c3 + tau * (12 * c4 + tau * 20 * c5)))
+            better = valid & (acc > best)
+            best = np.where(better, acc, best)
+            at = np.where(better, tau, at)
+        return best, self.times[:-1, None] + at
+
     def sample(self, t: float | ArrayLike, derivatives: int = 2) -> tuple[Array, ...]:
         """(q, qd, qdd[, qddd]) at time(s) ``t``; t is clamped to [0, duration].
 
@@ -555,6 +586,18 @@ def verify_trajectory(
         )
     v_ratio = np.abs(qd) / limits.max_velocity
     a_ratio = np.abs(qdd) / limits.max_acceleration
+    if len(traj) > 1:  # each interval's exact acceleration peak as well as the samples
+        peaks, peak_t = traj.acceleration_peaks()
+        peak_ratio = peaks / limits.max_acceleration
+        if float(np.max(peak_ratio)) > float(np.max(a_ratio)):
+            k, j = np.unravel_index(int(np.argmax(peak_ratio)), peak_ratio.shape)
+            row = np.zeros(traj.dof)
+            row[j] = peaks[k, j]
+            ts = np.append(ts, peak_t[k, j])
+            qd = np.vstack([qd, np.zeros_like(row)])
+            qdd = np.vstack([qdd, row])
+            v_ratio = np.vstack([v_ratio, np.zeros_like(row)])
+            a_ratio = np.vstack([a_ratio, row / limits.max_acceleration])
     for label, ratio, values, unit in (
         ("velocity", v_ratio, qd, "rad/s"),
         ("acceleration", a_ratio, qdd, "rad/s²"),

@@ -231,3 +231,39 @@ def test_time_parameterize_rejects_out_of_range_paths():
         time_parameterize(np.vstack([HOME, HOME + [0, 0, 3.0, 0, 0, 0]]), LIMITS, NAMES)
     with pytest.raises(InvalidInputError, match="method"):
         time_parameterize(np.vstack([HOME, HOME + 0.1]), LIMITS, NAMES, method="fast")
+
+
+def test_acceleration_peaks_are_exact_between_knots():
+    # a bang-bang acceleration sampled at coarse knots: the quintic between them overshoots
+    rng = np.random.default_rng(5)
+    times = np.cumsum(np.r_[0.0, rng.uniform(0.01, 0.05, 30)])
+    acc = np.where(rng.random((31, 6)) < 0.5, -1.0, 1.0)
+    vel = np.cumsum(acc * np.r_[0.0, np.diff(times)][:, None], axis=0)
+    pos = np.cumsum(vel * np.r_[0.0, np.diff(times)][:, None], axis=0)
+    traj = JointTrajectory(NAMES, times, pos, vel, acc)
+    peaks, at = traj.acceleration_peaks()
+    dense_t = np.linspace(0.0, traj.duration, 200_001)
+    dense = np.abs(traj.sample(dense_t)[2])
+    seg = np.clip(np.searchsorted(times, dense_t, side="right") - 1, 0, len(times) - 2)
+    for k in range(len(times) - 1):
+        inside = (seg == k) & (dense_t > times[k]) & (dense_t < times[k + 1])
+        sampled_max = dense[inside].max(axis=0)
+        assert np.all(sampled_max <= np.maximum(peaks[k], np.maximum(np.abs(acc[k]), np.abs(acc[k + 1]))) + 1e-6)
+        has_peak = peaks[k] > 0
+        assert np.all(peaks[k][has_peak] <= sampled_max[has_peak] + 1e-3)
+        assert np.all((at[k] >= times[k]) & (at[k] <= times[k + 1]))
+    assert peaks.max() > 1.05  # the overshoot a 24-point check could miss is there
+
+
+def test_verify_trajectory_catches_a_peak_between_samples():
+    lim = JointLimits.from_spec(NOVA5, jerk=False)
+    times = np.array([0.0, 0.05, 0.1])
+    a = lim.max_acceleration
+    acc = np.vstack([np.zeros(6), a, -a])  # a jump within one knot interval: the quintic overshoots
+    vel = np.vstack([np.zeros(6), a * 0.025, np.zeros(6)])
+    pos = HOME + np.vstack([np.zeros(6), a * 0.05**2 / 4, a * 0.05**2 / 2])
+    traj = JointTrajectory(NAMES, times, pos, vel, acc)
+    peaks, _ = traj.acceleration_peaks()
+    assert (peaks / lim.max_acceleration).max() > 1.01
+    with pytest.raises(TrajectoryLimitError, match="acceleration"):
+        verify_trajectory(traj, lim, samples_per_segment=4, at_rest=False)
