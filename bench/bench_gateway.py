@@ -9,6 +9,7 @@ PostgreSQL schema is created for the run and dropped after it.
 from __future__ import annotations
 
 import asyncio
+import logging
 import os
 import subprocess
 import sys
@@ -161,7 +162,9 @@ async def _run() -> None:
             finally:
                 proc.terminate()
                 proc.wait(timeout=15)
-            # 2. e-stop through the real robot driver to the simulated Dobot
+            # 2. e-stop through the real robot driver to the simulated Dobot (200 of them: the
+            # controller's alarm warning for each is expected here, not news)
+            logging.getLogger("pickplace.sim.controller").setLevel(logging.ERROR)
             s = load_settings("sim", overrides={"logging": {"file": None}, "grpc": {"robot_port": 0},
                                                 "zenoh": {"listen": [f"tcp/127.0.0.1:{free_loopback_port()}"]}})
             async with build_sim_server(s, "kinematic", ports={"dashboard": 0, "feedback": 0, "slow": 0}) as sim:
