@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import logging
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
@@ -45,6 +46,7 @@ from services.common.settings import REPO_ROOT, Settings
 log = logging.getLogger("pickplace.gateway")
 
 API_PREFIX = "/api/v1"
+CONFIG_REPUBLISH_S = 5.0  # how soon a restarted service catches up with PUT /config changes
 
 
 def repo_path(path: str) -> Path:
@@ -71,6 +73,8 @@ class Cell:
     health: dict[str, Any] | None = None
     ready: asyncio.Event = field(default_factory=asyncio.Event)
     edge_port: int | None = None
+    bus: Bus | None = None
+    config_patch: dict[str, Any] = field(default_factory=dict)  # every change PUT /config accepted
     _background: set[asyncio.Task[Any]] = field(default_factory=set)
 
     def spawn(self, coro: Any, name: str) -> asyncio.Task[Any]:
@@ -79,6 +83,19 @@ class Cell:
         self._background.add(task)
         task.add_done_callback(self._background.discard)
         return task
+
+    def publish_config(self, updated: list[str]) -> None:
+        """Send the accepted changes to the services (they apply them to their own settings)."""
+        if self.bus is None or not self.config_patch:
+            return
+        msg = common_pb2.ConfigUpdate(
+            header=common_pb2.Header(stamp_ns=time.time_ns()),
+            patch_json=json.dumps(self.config_patch, sort_keys=True), updated=updated,
+        )
+        try:
+            self.bus.publish(CellKeys(self.settings.cell_id).config_updates, msg)
+        except Exception as exc:  # the next periodic publication tries again
+            log.warning("configuration update not published: %s", exc)
 
     @property
     def uptime_s(self) -> float:
@@ -137,6 +154,13 @@ async def _poll_robot_status(cell: Cell) -> None:
         except RobotError as exc:
             cell.hub.on_robot_status(None, str(exc), asked_at=asked)
         await asyncio.sleep(period)
+
+
+async def _republish_config(cell: Cell) -> None:
+    """Repeat the accepted changes now and then, for a service that (re)started after the PUT."""
+    while True:
+        await asyncio.sleep(CONFIG_REPUBLISH_S)
+        cell.publish_config([])
 
 
 async def _sample_health(cell: Cell) -> None:
@@ -248,6 +272,7 @@ def create_app(
             )
             feeds.start()
             stack.callback(feeds.close)
+            cell.bus = the_bus
 
             if gw.edge_grpc_port is not None:
                 from gateway.edge import start_edge
@@ -259,6 +284,7 @@ def create_app(
                 ("gateway-pick-writer", writer.run()),
                 ("gateway-robot-status", _poll_robot_status(cell)),
                 ("gateway-health", _sample_health(cell)),
+                ("gateway-config", _republish_config(cell)),
             ):
                 t = asyncio.create_task(coro, name=name)
                 t.add_done_callback(_log_crash)

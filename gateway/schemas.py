@@ -149,5 +149,6 @@ class CalibrationView(BaseModel):
 class ConfigUpdateResult(BaseModel):
     success: bool
     updated: list[str]
-    applied_now: list[str] = []  # in effect at once (the gateway's own live settings)
-    applied_at_restart: list[str] = []  # stored; the other services read them when they start
+    applied_now: list[str] = []  # in effect as soon as the services receive the update (well under a second)
+    applied_next_cycle: list[str] = []  # taken at the next key-pose cycle / twin scene
+    note: str = "changes last until the cell restarts; keep them in a config file or profile"

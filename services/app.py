@@ -160,7 +160,9 @@ async def run_keypose_demo(settings: Settings, cycles: int, engine: str, console
 
             try:
                 for _ in itertools.islice(itertools.count(), cycles):
-                    rep = await run_keypose_cycle(svc.driver, settings.cycle, 1, settings.robot.speed_ratio, show)
+                    # svc.settings follows PUT /config: a changed cycle or speed applies from the next cycle
+                    rep = await run_keypose_cycle(svc.driver, svc.settings.cycle, 1, svc.settings.robot.speed_ratio,
+                                                  show)
                     total.cycles += rep.cycles
                     total.moves += rep.moves
                     total.cycle_times_s += rep.cycle_times_s

@@ -17,6 +17,7 @@ import grpc
 import numpy as np
 
 from services.common.bus import Bus
+from services.common.live_config import LiveConfig, with_twin
 from services.common.settings import Settings
 from services.robot.service import RobotService
 from services.sim.app import build_sim_server
@@ -63,6 +64,7 @@ class Cell:
 
     async def _start(self) -> None:
         from services.grasp.service import build_server as build_grasp
+        from services.motion.service import MotionPlannerServicer
         from services.motion.service import build_server as build_motion
 
         s = with_updates(self.settings, sim={"seed": self.seed, "engine": self.engine_name})
@@ -75,7 +77,10 @@ class Cell:
         self.robot = RobotService(s, self.bus)
         await self._stack.enter_async_context(self.robot)
         await self.robot.driver.enable()
-        motion_server, motion_port = build_motion(s, s.grpc.motion_port)
+        motion = MotionPlannerServicer(s)
+        motion_server, motion_port = build_motion(s, s.grpc.motion_port, motion)
+        self._motion = motion
+        await self._stack.enter_async_context(LiveConfig(self.bus, s, self._on_config))
         grasp_server, grasp_port = build_grasp(s, s.grpc.grasp_port)
         for server in (motion_server, grasp_server):
             await server.start()
@@ -95,6 +100,13 @@ class Cell:
         self.settings = s
         log.info("cell up: sim %s, grpc robot %d motion %d grasp %d vision %d task %d", self.sim.ports,
                  self.robot.grpc_port, motion_port, grasp_port, self.vision.grpc_port, self.task.grpc_port)
+
+    async def _on_config(self, new: Settings, changed: list[str]) -> None:
+        """PUT /config for the parts of the cell this object holds: the motion planner's settings at
+        once, the twin's scene layout from the next scene."""
+        await self._motion.on_config(new, changed)
+        if any(c.startswith("sim.twin.") for c in changed):
+            self.settings = with_twin(self.settings, new)
 
     async def _close_camera(self) -> None:
         cam = self.vision.camera if self.vision is not None else None

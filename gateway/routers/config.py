@@ -1,7 +1,8 @@
 """/config: read the running configuration; change the parts that may change at runtime (LLD §13.1).
 
-The gateway applies its own settings at once; the other services read theirs when they start, and
-the answer to PUT says which of the changed fields wait for that."""
+An accepted change is published to the services over Zenoh (pickplace/<cell>/config/updates); each
+applies it to its own settings at once, or at its next cycle for the demo cycle and the twin's scene.
+Changes last until the cell restarts."""
 
 from __future__ import annotations
 
@@ -9,9 +10,9 @@ from typing import Any
 
 from fastapi import APIRouter, Body
 
-from gateway.config_update import LIVE, UPDATABLE, apply_patch
 from gateway.deps import Authorized, CellDep
 from gateway.schemas import ConfigUpdateResult
+from services.common.config_patch import UPDATABLE, apply_patch, merge_patches, when_applied
 
 router = APIRouter(prefix="/config", tags=["config"])
 
@@ -31,9 +32,12 @@ async def put_config(cell: CellDep, patch: Any = Body(..., examples=[{"robot": {
     """Apply a partial settings document. 422 names every refused field; nothing changes then."""
     new, changed = apply_patch(cell.settings, patch)
     cell.settings = new
+    if changed:
+        cell.config_patch = merge_patches(cell.config_patch, patch)
+        cell.publish_config(changed)
     if "gateway.joint_state_rate_hz" in changed:
         cell.hub.set_joint_rate(new.gateway.joint_state_rate_hz)
     cell.hub.on_event("config", {"updated": changed})
-    now = [c for c in changed if c in LIVE]
-    return ConfigUpdateResult(success=True, updated=changed, applied_now=now,
-                              applied_at_restart=[c for c in changed if c not in LIVE])
+    return ConfigUpdateResult(success=True, updated=changed,
+                              applied_now=[c for c in changed if when_applied(c) == "now"],
+                              applied_next_cycle=[c for c in changed if when_applied(c) == "next_cycle"])

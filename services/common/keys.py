@@ -60,6 +60,12 @@ class CellKeys:
     def task_commands(self) -> str:
         return f"{self.prefix}/task/commands"
 
+    # configuration
+    @property
+    def config_updates(self) -> str:
+        """pickplace.v1.ConfigUpdate: the gateway's accepted PUT /config changes (on each PUT and periodically)."""
+        return f"{self.prefix}/config/updates"
+
     @property
     def all(self) -> str:
         return f"{self.prefix}/**"

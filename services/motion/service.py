@@ -18,7 +18,9 @@ from pickplace.v1 import motion_pb2, motion_pb2_grpc
 from prometheus_client import Counter, Histogram
 
 from services.common import grpc_util
+from services.common.bus import Bus
 from services.common.errors import InvalidInputError
+from services.common.live_config import LiveConfig
 from services.common.messages import pose_to_matrix
 from services.common.settings import MotionSettings, Settings
 from services.motion.collision import AttachedObject, Box, Scene
@@ -131,6 +133,11 @@ class MotionPlannerServicer(motion_pb2_grpc.MotionPlannerServicer):
         self.settings = settings
         self.motion = settings.motion
         self.tool = tool_geometry(settings)
+
+    async def on_config(self, new: Settings, changed: list[str]) -> None:
+        """PUT /config: planner, time budget and speed scales apply from the next request."""
+        self.settings = new
+        self.motion = new.motion
 
     def _arm(self, model: str) -> ArmModel:
         name = model or self.settings.robot.model
@@ -246,24 +253,28 @@ class MotionPlannerServicer(motion_pb2_grpc.MotionPlannerServicer):
 
 
 # --- server -------------------------------------------------------------------------------------
-def build_server(settings: Settings, port: int | None = None) -> tuple[grpc.aio.Server, int]:
+def build_server(
+    settings: Settings, port: int | None = None, servicer: MotionPlannerServicer | None = None
+) -> tuple[grpc.aio.Server, int]:
     """A MotionPlanner gRPC server bound to ``settings.grpc.host`` (not started); returns (server, port).
 
     ``port``: None = ``settings.grpc.motion_port``; 0 = any free port.
     """
     server = grpc_util.create_server()
-    motion_pb2_grpc.add_MotionPlannerServicer_to_server(MotionPlannerServicer(settings), server)
+    motion_pb2_grpc.add_MotionPlannerServicer_to_server(servicer or MotionPlannerServicer(settings), server)
     bound = grpc_util.bind(server, settings.grpc.host, settings.grpc.motion_port if port is None else port)
     return server, bound
 
 
 async def serve(settings: Settings) -> None:
-    """``pickplace serve motion``: run until cancelled."""
+    """``pickplace serve motion``: run until cancelled, following PUT /config changes over Zenoh."""
     load_arm(settings.robot.model, tool_geometry(settings))  # fail fast on a bad model/tool
-    server, port = build_server(settings)
-    await server.start()
-    log.info("motion service serving MotionPlanner on %s:%d", settings.grpc.host, port)
-    try:
-        await server.wait_for_termination()
-    finally:
-        await server.stop(grace=0.5)
+    servicer = MotionPlannerServicer(settings)
+    server, port = build_server(settings, servicer=servicer)
+    async with Bus(settings.zenoh) as bus, LiveConfig(bus, settings, servicer.on_config):
+        await server.start()
+        log.info("motion service serving MotionPlanner on %s:%d", settings.grpc.host, port)
+        try:
+            await server.wait_for_termination()
+        finally:
+            await server.stop(grace=0.5)

@@ -433,6 +433,11 @@ class DobotClient:
     async def speed_factor(self, ratio: int) -> None:
         await self.request(P.speed_factor(ratio))
 
+    async def acceleration_ratio(self, ratio: int) -> None:
+        """AccJ and AccL at once: the acceleration percentage of MovJ / MovL without their own ``a=``."""
+        for cmd in P.acceleration_ratios(ratio):
+            await self.request(cmd)
+
     async def stop(self) -> None:
         await self.request("Stop()")
 

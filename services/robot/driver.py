@@ -14,7 +14,7 @@ import contextlib
 import logging
 import time
 from collections.abc import Awaitable, Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TypeVar
 
 import numpy as np
@@ -74,7 +74,20 @@ class RobotDriver:
 
     async def start(self) -> None:
         await self.client.connect()
+        await self._send_ratios()
+
+    async def _send_ratios(self) -> None:
         await self.client.speed_factor(self.settings.robot.speed_ratio)
+        await self.client.acceleration_ratio(self.settings.robot.acc_ratio)
+
+    async def update_settings(self, new: Settings, changed: list[str]) -> None:
+        """A live configuration change (PUT /config): the workspace box guards the next command; speed
+        and acceleration ratios go to the controller at once (immediate commands, also mid-motion)."""
+        self.settings = new
+        if any(c.startswith("robot.workspace") for c in changed):
+            self.limits = replace(self.limits, workspace=new.robot.workspace)
+        if {"robot.speed_ratio", "robot.acc_ratio"} & set(changed):
+            await self._send_ratios()
 
     # ------------------------------------------------------------------ state
     @property

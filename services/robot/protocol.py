@@ -285,6 +285,13 @@ def speed_factor(ratio: int) -> str:
     return command("SpeedFactor", fmt_int(ratio))
 
 
+def acceleration_ratios(ratio: int) -> tuple[str, str]:
+    """AccJ and AccL: the default acceleration percentage of joint and linear moves."""
+    if not 1 <= int(ratio) <= 100:
+        raise ValueError(f"acceleration ratio must be 1-100, got {ratio}")
+    return command("AccJ", fmt_int(ratio)), command("AccL", fmt_int(ratio))
+
+
 def emergency_stop(press: bool = True) -> str:
     return command("EmergencyStop", "1" if press else "0")
 

@@ -21,6 +21,7 @@ from services.common.bus import Bus
 from services.common.errors import InvalidInputError
 from services.common.frames import finite_vector
 from services.common.keys import CellKeys
+from services.common.live_config import LiveConfig
 from services.common.messages import pose_to_matrix
 from services.common.settings import Settings
 from services.motion.robot_models import get_robot
@@ -218,6 +219,7 @@ class RobotService:
         self.hub = JointStateHub(self.driver, bus, CellKeys(settings.cell_id))
         self.server: grpc.aio.Server | None = None
         self.grpc_port = settings.grpc.robot_port if grpc_port is None else grpc_port
+        self.live: LiveConfig | None = None
 
     async def start(self) -> int:
         await self.driver.start()
@@ -228,10 +230,19 @@ class RobotService:
         )
         self.grpc_port = grpc_util.bind(self.server, self.settings.grpc.host, self.grpc_port)
         await self.server.start()
+        if self.bus is not None:
+            self.live = LiveConfig(self.bus, self.settings, self._on_config).start()
         log.info("robot driver serving RobotController on %s:%d", self.settings.grpc.host, self.grpc_port)
         return self.grpc_port
 
+    async def _on_config(self, new: Settings, changed: list[str]) -> None:
+        self.settings = new
+        await self.driver.update_settings(new, changed)
+
     async def stop(self) -> None:
+        if self.live is not None:
+            await self.live.stop()
+            self.live = None
         if self.server is not None:
             await self.server.stop(grace=0.5)
             self.server = None

@@ -24,6 +24,7 @@ from typing import Any
 from services.common.bus import Bus
 from services.common.errors import InvalidInputError, RobotCommunicationError
 from services.common.keys import CellKeys
+from services.common.live_config import LiveConfig, with_twin
 from services.common.settings import Settings
 from services.sim.dobot_server import SimDobotServer
 from services.vision.camera import RGBDFrame
@@ -90,6 +91,7 @@ class SimBusLink:
         self._tasks: list[asyncio.Task[Any]] = []
         self._queryable: Any = None
         self._reset_lock = asyncio.Lock()
+        self._live: LiveConfig | None = None
 
     async def __aenter__(self) -> SimBusLink:
         from services.sim.twin.camera import TwinCamera
@@ -103,12 +105,19 @@ class SimBusLink:
                 publish_camera_frames(self.camera, self.bus, keys.camera_frames, self.frame_rate, self._stop),  # type: ignore[arg-type]
                 name="sim.frames"))
         self._queryable = self.bus.session.declare_queryable(scene_reset_key(self.settings.cell_id), self._on_query)
+        self._live = LiveConfig(self.bus, self.settings, self._on_config).start()
         log.info("sim on zenoh: frames %s on %s, scene reset on %s", "published" if self.frames else "off",
                  keys.camera_frames, scene_reset_key(self.settings.cell_id))
         return self
 
+    async def _on_config(self, new: Settings, changed: list[str]) -> None:
+        """PUT /config: a changed scene layout is laid out at the next scene reset."""
+        self.settings = with_twin(self.settings, new)
+
     async def __aexit__(self, *exc: object) -> None:
         self._stop.set()
+        if self._live is not None:
+            await self._live.stop()
         if self._queryable is not None:
             with contextlib.suppress(Exception):
                 self._queryable.undeclare()

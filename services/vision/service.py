@@ -36,6 +36,7 @@ from services.common.errors import (
     VisionError,
 )
 from services.common.keys import CellKeys
+from services.common.live_config import LiveConfig
 from services.common.metrics import CellMetrics
 from services.common.settings import REPO_ROOT, CalibrationSettings, CameraSourceSettings, Settings
 from services.vision.calibration import manual_T_base_camera, read_calibration
@@ -133,6 +134,7 @@ class VisionService:
         self._bus_frame_event = asyncio.Event()
         self._subscription: object | None = None
         self._loop_task: asyncio.Task[None] | None = None
+        self.live: LiveConfig | None = None
         self._detect_lock = asyncio.Lock()
 
     # --- lifecycle ---------------------------------------------------------------------------------
@@ -150,11 +152,22 @@ class VisionService:
         await self.server.start()
         if self.publish_loop and (self.camera is not None or self._subscription is not None):
             self._loop_task = asyncio.create_task(self._run(), name="vision.publish")
+        if self.bus is not None:
+            self.live = LiveConfig(self.bus, self.settings, self._on_config).start()
         log.info("vision serving on %s:%d; camera %s; calibration: %s", self.settings.grpc.host, self.grpc_port,
                  type(self.camera).__name__ if self.camera else "Zenoh frame stream", self.calibration_source)
         return self.grpc_port
 
+    async def _on_config(self, new: Settings, changed: list[str]) -> None:
+        """PUT /config: the rate applies from the next frame, the enabled detectors from the next detection."""
+        self.settings = new
+        if any(c.startswith("vision.") for c in changed):
+            self.pipeline.settings = new.vision
+
     async def stop(self) -> None:
+        if self.live is not None:
+            await self.live.stop()
+            self.live = None
         if self._loop_task is not None:
             self._loop_task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -246,9 +259,9 @@ class VisionService:
             log.warning("zenoh publish failed: %s", exc)
 
     async def _run(self) -> None:
-        period = 1.0 / self.settings.vision.rate_hz
         failures = 0
         while True:
+            period = 1.0 / self.settings.vision.rate_hz  # read each time: PUT /config may change it
             t0 = time.monotonic()
             try:
                 await self.detect_once()

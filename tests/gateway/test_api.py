@@ -209,11 +209,13 @@ async def test_put_config_validates_and_applies(settings, sqlite_db, tmp_path):
         r = await c.put("/api/v1/config", json={"robot": {"speed_ratio": 25}, "motion": {"planner": "PRM"}},
                         headers=AUTH)
         assert r.status_code == 200 and sorted(r.json()["updated"]) == ["motion.planner", "robot.speed_ratio"]
-        # the services read these at start: the answer says so rather than implying they act now
-        assert sorted(r.json()["applied_at_restart"]) == ["motion.planner", "robot.speed_ratio"]
-        assert r.json()["applied_now"] == []
-        r = await c.put("/api/v1/config", json={"gateway": {"joint_state_rate_hz": 5}}, headers=AUTH)
-        assert r.json()["applied_now"] == ["gateway.joint_state_rate_hz"] and r.json()["applied_at_restart"] == []
+        # published to the services, which apply these at once (test_config_live shows them do it)
+        assert sorted(r.json()["applied_now"]) == ["motion.planner", "robot.speed_ratio"]
+        assert r.json()["applied_next_cycle"] == [] and "restart" in r.json()["note"]
+        r = await c.put("/api/v1/config", json={"gateway": {"joint_state_rate_hz": 5},
+                                                "cycle": {"dwell_s": 0.2}}, headers=AUTH)
+        assert r.json()["applied_now"] == ["gateway.joint_state_rate_hz"]
+        assert r.json()["applied_next_cycle"] == ["cycle.dwell_s"]
         cfg = (await c.get("/api/v1/config")).json()
         assert cfg["robot"]["speed_ratio"] == 25 and cfg["motion"]["planner"] == "PRM"
         assert cfg["gateway"]["api_token"] == "**********"

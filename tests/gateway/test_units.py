@@ -10,12 +10,12 @@ from pickplace.v1 import common_pb2, robot_pb2
 from prometheus_client import generate_latest
 
 from gateway import health
-from gateway.config_update import ConfigRejected, apply_patch, is_updatable, leaf_paths
 from gateway.convert import pick_row, validate_pick_event
 from gateway.errors import status_for
 from gateway.live import CLIENT_QUEUE, LiveHub
 from gateway.security import bearer_from_header, generate_token, token_matches
 from services.common import errors as E
+from services.common.config_patch import ConfigRejected, apply_patch, is_updatable, leaf_paths
 from services.common.metrics import CellMetrics
 from services.common.settings import GatewaySettings, load_settings
 from tests.gateway.conftest import pick_event

@@ -99,3 +99,13 @@ class CommandResponse(_message.Message):
     success: bool
     message: str
     def __init__(self, success: _Optional[bool] = ..., message: _Optional[str] = ...) -> None: ...
+
+class ConfigUpdate(_message.Message):
+    __slots__ = ("header", "patch_json", "updated")
+    HEADER_FIELD_NUMBER: _ClassVar[int]
+    PATCH_JSON_FIELD_NUMBER: _ClassVar[int]
+    UPDATED_FIELD_NUMBER: _ClassVar[int]
+    header: Header
+    patch_json: str
+    updated: _containers.RepeatedScalarFieldContainer[str]
+    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., patch_json: _Optional[str] = ..., updated: _Optional[_Iterable[str]] = ...) -> None: ...

@@ -3,7 +3,8 @@
 A patch is a partial settings document (``{"robot": {"speed_ratio": 30}}``). Every leaf must lie
 under one of :data:`UPDATABLE`; each touched section is re-validated as a whole by its settings
 model, so the same rules that guard start-up (speed ratio 1–100 %, an ordered workspace box…)
-guard a live change. Nothing is applied unless everything is valid.
+guard a live change. Nothing is applied unless everything is valid. The gateway validates a PUT
+with it; each service applies the published patch to its own settings with it again.
 """
 
 from __future__ import annotations
@@ -34,8 +35,20 @@ UPDATABLE: tuple[str, ...] = (
 )
 
 
-# The changes the gateway puts into effect itself; every other service reads its settings at start.
-LIVE: frozenset[str] = frozenset({"gateway.joint_state_rate_hz"})
+# When each change takes effect: at once (the gateway itself; the robot driver, motion and vision
+# services on receiving the update), or at the next cycle / scene (the key-pose demo cycle, the
+# twin's scene). Nothing waits for a restart; nothing survives one either (put it in a config file).
+NEXT_CYCLE: frozenset[str] = frozenset({
+    "sim.twin.scene.drop_zones_m",
+    "sim.twin.scene.rod_place_m",
+    "cycle.move_duration_s",
+    "cycle.dwell_s",
+})
+
+
+def when_applied(path: str) -> str:
+    """"now" or "next_cycle" for an updatable leaf path."""
+    return "next_cycle" if any(path == k or path.startswith(k + ".") for k in NEXT_CYCLE) else "now"
 
 
 class ConfigRejected(InvalidInputError):
@@ -110,3 +123,19 @@ def _get(obj: Any, path: str) -> Any:
     for part in path.split("."):
         obj = obj.get(part) if isinstance(obj, dict) else getattr(obj, part, None)
     return obj
+
+
+def merge_patches(earlier: dict[str, Any], later: dict[str, Any]) -> dict[str, Any]:
+    """One patch with the effect of ``earlier`` then ``later`` (the gateway keeps every accepted change)."""
+    out = dict(earlier)
+    for section, section_patch in later.items():
+        if isinstance(section_patch, dict) and isinstance(out.get(section), dict):
+            out[section] = _replace_leaf_dicts(deep_merge(out[section], section_patch), section_patch, section)
+        else:
+            out[section] = section_patch
+    return out
+
+
+def changed_paths(before: Settings, after: Settings, paths: list[str]) -> list[str]:
+    """Those of ``paths`` whose value differs between two settings."""
+    return [p for p in dict.fromkeys(paths) if _get(after, p) != _get(before, p)]
