@@ -1,4 +1,4 @@
-"""Running a command's top-level coroutine: Ctrl-C and SIGTERM cancel it cleanly."""
+"""Running a command's top-level coroutine (Ctrl-C and SIGTERM cancel it cleanly); stopping background tasks."""
 
 from __future__ import annotations
 
@@ -23,3 +23,12 @@ def run_until_signal(main: Awaitable[Any]) -> Any:
         return await main
 
     return asyncio.run(runner())
+
+
+async def cancel_and_wait(task: asyncio.Task[Any] | None) -> None:
+    """Cancel a background task and wait until it has finished its cleanup (None: nothing to do)."""
+    if task is None:
+        return
+    task.cancel()
+    with contextlib.suppress(asyncio.CancelledError):
+        await task

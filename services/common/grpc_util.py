@@ -105,6 +105,16 @@ def bind(server: grpc.aio.Server, host: str, port: int) -> int:
     return bound
 
 
+async def serve_until_terminated(server: grpc.aio.Server, what: str, host: str, port: int) -> None:
+    """Start a built server, say where it serves, and run it until cancelled or terminated."""
+    await server.start()
+    log.info("%s serving on %s:%d", what, host, port)
+    try:
+        await server.wait_for_termination()
+    finally:
+        await server.stop(grace=0.5)
+
+
 def translate(exc: grpc.RpcError) -> RobotError:
     """Map a gRPC error from a pickplace server back to the pickplace error it carried."""
     name = "RobotError"

@@ -9,7 +9,6 @@ calls ``on_change(new_settings, changed_paths)`` when something it holds changed
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import json
 import logging
 from collections.abc import Awaitable, Callable
@@ -17,6 +16,7 @@ from types import TracebackType
 
 from pickplace.v1 import common_pb2
 
+from services.common.aio import cancel_and_wait
 from services.common.bus import AsyncSubscription, Bus
 from services.common.config_patch import apply_patch, changed_paths, leaf_paths
 from services.common.errors import InvalidInputError
@@ -63,11 +63,8 @@ class LiveConfig:
         return self
 
     async def stop(self) -> None:
-        if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
-            self._task = None
+        await cancel_and_wait(self._task)
+        self._task = None
         if self._sub is not None:
             self._sub.close()
             self._sub = None

@@ -164,9 +164,4 @@ def build_server(settings: Settings, port: int | None = None) -> tuple[grpc.aio.
 async def serve(settings: Settings) -> None:
     """``pickplace serve grasp``: run until cancelled."""
     server, port = build_server(settings)
-    await server.start()
-    log.info("grasp service serving GraspPlanner on %s:%d", settings.grpc.host, port)
-    try:
-        await server.wait_for_termination()
-    finally:
-        await server.stop(grace=0.5)
+    await grpc_util.serve_until_terminated(server, "grasp service (GraspPlanner)", settings.grpc.host, port)

@@ -272,9 +272,4 @@ async def serve(settings: Settings) -> None:
     servicer = MotionPlannerServicer(settings)
     server, port = build_server(settings, servicer=servicer)
     async with Bus(settings.zenoh) as bus, LiveConfig(bus, settings, servicer.on_config):
-        await server.start()
-        log.info("motion service serving MotionPlanner on %s:%d", settings.grpc.host, port)
-        try:
-            await server.wait_for_termination()
-        finally:
-            await server.stop(grace=0.5)
+        await grpc_util.serve_until_terminated(server, "motion service (MotionPlanner)", settings.grpc.host, port)

@@ -28,6 +28,7 @@ import numpy as np
 from pickplace.v1 import common_pb2, vision_pb2, vision_pb2_grpc
 
 from services.common import grpc_util
+from services.common.aio import cancel_and_wait
 from services.common.bus import Bus
 from services.common.errors import (
     CameraConnectionError,
@@ -168,11 +169,8 @@ class VisionService:
         if self.live is not None:
             await self.live.stop()
             self.live = None
-        if self._loop_task is not None:
-            self._loop_task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._loop_task
-            self._loop_task = None
+        await cancel_and_wait(self._loop_task)
+        self._loop_task = None
         if self.server is not None:
             await self.server.stop(grace=0.5)
             self.server = None
