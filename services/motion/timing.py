@@ -290,9 +290,17 @@ def toppra_path(
 
 
 def _slowdown_factor(traj: JointTrajectory, limits: JointLimits, scale: float) -> float:
-    """Uniform time-scale factor that brings knot velocity, acceleration and mean jerk within limits."""
+    """Uniform time-scale factor that brings velocity, acceleration and mean jerk within limits.
+
+    Acceleration is taken at its exact peaks between knots as well: where the path's curvature
+    changes quickly the interpolation between 10 ms knots overshoots the knots' values by up to ~20 %,
+    and scaling for it here once is far cheaper than timing the path again at lower limits.
+    """
     v = float(np.max(np.abs(traj.velocities) / (limits.max_velocity * scale)))
-    a = float(np.max(np.abs(traj.accelerations) / (limits.max_acceleration * scale)))
+    a_limit = limits.max_acceleration * scale
+    a = float(np.max(np.abs(traj.accelerations) / a_limit))
+    if len(traj) > 1:
+        a = max(a, float(np.max(traj.acceleration_peaks()[0] / a_limit)))
     k = max(1.0, v, math.sqrt(a))
     if limits.max_jerk is not None and len(traj) > 1:
         jerk = np.abs(np.diff(traj.accelerations, axis=0) / np.diff(traj.times)[:, None])
