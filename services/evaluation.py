@@ -86,7 +86,8 @@ class EvalReport:
         """Median real-time duration of each state over the successful trials, in cycle order."""
         ok = [r.stage_durations_real_s for r in self.results if r.success]
         keys = list(dict.fromkeys(k for d in ok for k in d))
-        return {k: round(statistics.median(d.get(k, 0.0) for d in ok), 3) for k in keys}
+        medians = {k: round(statistics.median(d.get(k, 0.0) for d in ok), 3) for k in keys}
+        return {k: v for k, v in medians.items() if v > 0}  # a state most cycles never enter says nothing
 
     def to_json(self) -> str:
         return json.dumps({"summary": self.summary(), "trials": [asdict(r) for r in self.results]}, indent=2)
