@@ -46,9 +46,14 @@ NEXT_CYCLE: frozenset[str] = frozenset({
 })
 
 
+def _under(path: str, roots: frozenset[str] | tuple[str, ...]) -> bool:
+    """``path`` is one of ``roots`` or lies below one of them."""
+    return any(path == r or path.startswith(r + ".") for r in roots)
+
+
 def when_applied(path: str) -> str:
     """"now" or "next_cycle" for an updatable leaf path."""
-    return "next_cycle" if any(path == k or path.startswith(k + ".") for k in NEXT_CYCLE) else "now"
+    return "next_cycle" if _under(path, NEXT_CYCLE) else "now"
 
 
 class ConfigRejected(InvalidInputError):
@@ -76,7 +81,7 @@ def _is_updatable_leaf_dict(path: str) -> bool:
 
 
 def is_updatable(path: str) -> bool:
-    return any(path == u or path.startswith(u + ".") for u in UPDATABLE)
+    return _under(path, UPDATABLE)
 
 
 def apply_patch(current: Settings, patch: Any) -> tuple[Settings, list[str]]:

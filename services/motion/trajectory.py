@@ -584,29 +584,22 @@ def verify_trajectory(
             f"joint {j + 1} position {q[k, j]:.6f} rad at t = {ts[k]:.4f} s is outside "
             f"[{limits.lower[j]:.4f}, {limits.upper[j]:.4f}]"
         )
-    v_ratio = np.abs(qd) / limits.max_velocity
-    a_ratio = np.abs(qdd) / limits.max_acceleration
-    if len(traj) > 1:  # each interval's exact acceleration peak as well as the samples
+    sample_t = np.broadcast_to(ts[:, None], qd.shape)
+    acc, acc_t = qdd, sample_t
+    if len(traj) > 1:  # each interval's exact acceleration peak (a magnitude) as well as the samples
         peaks, peak_t = traj.acceleration_peaks()
-        peak_ratio = peaks / limits.max_acceleration
-        if float(np.max(peak_ratio)) > float(np.max(a_ratio)):
-            k, j = np.unravel_index(int(np.argmax(peak_ratio)), peak_ratio.shape)
-            row = np.zeros(traj.dof)
-            row[j] = peaks[k, j]
-            ts = np.append(ts, peak_t[k, j])
-            qd = np.vstack([qd, np.zeros_like(row)])
-            qdd = np.vstack([qdd, row])
-            v_ratio = np.vstack([v_ratio, np.zeros_like(row)])
-            a_ratio = np.vstack([a_ratio, row / limits.max_acceleration])
-    for label, ratio, values, unit in (
-        ("velocity", v_ratio, qd, "rad/s"),
-        ("acceleration", a_ratio, qdd, "rad/s²"),
+        acc, acc_t = np.vstack([qdd, peaks]), np.vstack([sample_t, peak_t])
+    v_ratio = np.abs(qd) / limits.max_velocity
+    a_ratio = np.abs(acc) / limits.max_acceleration
+    for label, ratio, values, times, unit in (
+        ("velocity", v_ratio, qd, sample_t, "rad/s"),
+        ("acceleration", a_ratio, acc, acc_t, "rad/s²"),
     ):
         if float(np.max(ratio)) > 1.0 + tolerance:
             k, j = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
             lim = limits.max_velocity if label == "velocity" else limits.max_acceleration
             raise TrajectoryLimitError(
-                f"joint {j + 1} {label} {values[k, j]:.4f} {unit} at t = {ts[k]:.4f} s exceeds the limit "
+                f"joint {j + 1} {label} {values[k, j]:.4f} {unit} at t = {times[k, j]:.4f} s exceeds the limit "
                 f"{lim[j]:.4f} {unit} ({ratio[k, j]:.1%} of it)"
             )
     jerk_ratio = 0.0

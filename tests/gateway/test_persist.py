@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-from collections.abc import Sequence
+from collections.abc import AsyncIterator, Sequence
 
 import pytest
 from pickplace.v1 import task_pb2
@@ -189,9 +189,9 @@ class TcpProxy:
         self._writers -= {writer, up_writer}
 
 
-@pytest.mark.integration
-@pytest.mark.postgres
-async def test_no_pick_lost_when_postgres_connection_is_cut(settings, tmp_path):
+@contextlib.asynccontextmanager
+async def postgres_behind_proxy() -> AsyncIterator[tuple[DatabaseSettings, DatabaseSettings, TcpProxy]]:
+    """A migrated PostgreSQL schema, reached directly and through a proxy the test can cut."""
     async with postgres_schema() as schema:
         direct = DatabaseSettings(url=PG_URL, schema_name=schema)
         await migrate_up(direct)
@@ -201,6 +201,16 @@ async def test_no_pick_lost_when_postgres_connection_is_cut(settings, tmp_path):
             "url": PG_URL.replace("127.0.0.1:5432", f"127.0.0.1:{proxy.port}"),
             "connect_timeout_s": 1.0, "command_timeout_s": 2.0,
         })
+        try:
+            yield direct, via_proxy, proxy
+        finally:
+            await proxy.cut()
+
+
+@pytest.mark.integration
+@pytest.mark.postgres
+async def test_no_pick_lost_when_postgres_connection_is_cut(settings, tmp_path):
+    async with postgres_behind_proxy() as (direct, via_proxy, proxy):
         # small memory bound so the outage also exercises the spill file
         s = gateway_settings(settings, via_proxy, tmp_path, pick_buffer_size=5, pick_batch_size=4)
         keys = CellKeys(s.cell_id)
@@ -243,7 +253,6 @@ async def test_no_pick_lost_when_postgres_connection_is_cut(settings, tmp_path):
                 total = await session.scalar(select(func.count()).select_from(Pick))
         finally:
             await engine.dispose()
-        await proxy.cut()
     assert total == 35 and dup == 0
     assert sorted(ids) == sorted(published)
 
@@ -251,15 +260,7 @@ async def test_no_pick_lost_when_postgres_connection_is_cut(settings, tmp_path):
 @pytest.mark.integration
 @pytest.mark.postgres
 async def test_picks_buffered_at_shutdown_are_written_by_the_next_start(settings, tmp_path):
-    async with postgres_schema() as schema:
-        direct = DatabaseSettings(url=PG_URL, schema_name=schema)
-        await migrate_up(direct)
-        proxy = TcpProxy(5432)
-        await proxy.start()
-        via_proxy = direct.model_copy(update={
-            "url": PG_URL.replace("127.0.0.1:5432", f"127.0.0.1:{proxy.port}"),
-            "connect_timeout_s": 1.0, "command_timeout_s": 2.0,
-        })
+    async with postgres_behind_proxy() as (_, via_proxy, proxy):
         s = gateway_settings(settings, via_proxy, tmp_path)
         spill = tmp_path / "pick_spill.jsonl"
         events = [pick_event(i) for i in range(6)]
@@ -277,4 +278,3 @@ async def test_picks_buffered_at_shutdown_are_written_by_the_next_start(settings
                 r = await gw.client.get("/api/v1/picks")
                 assert sorted(p["pick_id"] for p in r.json()) == sorted(e.pick_id for e in events)
         assert spill.read_text() == ""
-        await proxy.cut()
