@@ -34,7 +34,7 @@ test: install
 
 lint: install
 	$(VENV)/bin/ruff check .
-	$(VENV)/bin/ruff format --check services gateway tests bench || true
+	$(VENV)/bin/ruff format --check services gateway tests bench
 
 proto: install
 	$(PY) -m services.common.protogen

@@ -36,8 +36,6 @@ REQUESTS = 1000
 ESTOPS = 200
 
 
-
-
 def _pct(ms: list[float]) -> str:
     a = np.asarray(ms)
     return f"p50 {np.percentile(a, 50):.2f} ms, p99 {np.percentile(a, 99):.2f} ms (n={a.size})"
@@ -55,17 +53,25 @@ async def _fill(db: DatabaseSettings) -> float:
                 rows = []
                 for i in range(base, base + 10_000):
                     ok = bool(rng.random() < 0.93)
-                    rows.append({
-                        "pick_id": uuid.UUID(int=int(rng.integers(0, 2**63)) << 64 | i).hex,
-                        "timestamp": start + timedelta(seconds=26 * i),
-                        "robot_id": "robot_01", "object_class": "rod" if i % 3 else "cube_red",
-                        "pick_pose": {"x": 0.45, "y": 0.0, "z": 0.02, "qx": 0, "qy": 0, "qz": 0, "qw": 1},
-                        "place_pose": None, "grasp_quality": float(rng.uniform(0.5, 1)),
-                        "cycle_time": float(rng.normal(9, 1)), "success": ok,
-                        "error_code": None if ok else "GraspFailureError",
-                        "error_message": None if ok else "object slipped", "task": "stand-rod",
-                        "stage_reached": "DONE" if ok else "LIFT", "stage_durations": {"PLAN": 0.5}, "attempts": 1,
-                    })
+                    rows.append(
+                        {
+                            "pick_id": uuid.UUID(int=int(rng.integers(0, 2**63)) << 64 | i).hex,
+                            "timestamp": start + timedelta(seconds=26 * i),
+                            "robot_id": "robot_01",
+                            "object_class": "rod" if i % 3 else "cube_red",
+                            "pick_pose": {"x": 0.45, "y": 0.0, "z": 0.02, "qx": 0, "qy": 0, "qz": 0, "qw": 1},
+                            "place_pose": None,
+                            "grasp_quality": float(rng.uniform(0.5, 1)),
+                            "cycle_time": float(rng.normal(9, 1)),
+                            "success": ok,
+                            "error_code": None if ok else "GraspFailureError",
+                            "error_message": None if ok else "object slipped",
+                            "task": "stand-rod",
+                            "stage_reached": "DONE" if ok else "LIFT",
+                            "stage_durations": {"PLAN": 0.5},
+                            "attempts": 1,
+                        }
+                    )
                 await conn.execute(Pick.__table__.insert(), rows)
         async with engine.connect() as conn:  # what autovacuum would do soon after such a load
             await conn.execution_options(isolation_level="AUTOCOMMIT")
@@ -92,8 +98,13 @@ def _start_gateway(db: DatabaseSettings, port: int, robot_port: int, tmp: Path) 
         "PICKPLACE_LOGGING__LEVEL": "WARNING",
     }
     env.pop("DATABASE_URL", None)
-    return subprocess.Popen([sys.executable, "-m", "services.cli", "serve", "gateway"], cwd=REPO_ROOT, env=env,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    return subprocess.Popen(
+        [sys.executable, "-m", "services.cli", "serve", "gateway"],
+        cwd=REPO_ROOT,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
 
 
 async def _wait_up(url: str, proc: subprocess.Popen[bytes]) -> None:
@@ -101,7 +112,9 @@ async def _wait_up(url: str, proc: subprocess.Popen[bytes]) -> None:
         deadline = time.monotonic() + 30
         while time.monotonic() < deadline:
             if proc.poll() is not None:
-                raise RuntimeError(f"gateway exited: {proc.stderr.read().decode()[-2000:] if proc.stderr else ''}")
+                raise RuntimeError(
+                    f"gateway exited: {proc.stderr.read().decode()[-2000:] if proc.stderr else ''}"
+                )
             try:
                 if (await c.get(url + "/api/v1/system/status")).status_code == 200:
                     return
@@ -152,24 +165,39 @@ async def _run() -> None:
             try:
                 url = f"http://127.0.0.1:{port}"
                 await _wait_up(url, proc)
-                for path in ("/api/v1/system/status", "/api/v1/picks?limit=100&offset=0",
-                             "/api/v1/picks?limit=100&offset=50000", "/api/v1/metrics"):
+                for path in (
+                    "/api/v1/system/status",
+                    "/api/v1/picks?limit=100&offset=0",
+                    "/api/v1/picks?limit=100&offset=50000",
+                    "/api/v1/metrics",
+                ):
                     rps, lat = await _load(url, path)
                     print(f"GET {path}: {rps:6.0f} req/s, {_pct(lat)} ({CONCURRENCY} concurrent)")
                 cpu = _cpu_seconds(proc.pid)
                 if cpu is not None:
-                    print(f"gateway process CPU over the read load: {cpu:.1f} s for {4 * (REQUESTS + 50)} requests")
+                    print(
+                        f"gateway process CPU over the read load: {cpu:.1f} s for {4 * (REQUESTS + 50)} requests"
+                    )
             finally:
                 proc.terminate()
                 proc.wait(timeout=15)
             # 2. e-stop through the real robot driver to the simulated Dobot (200 of them: the
             # controller's alarm warning for each is expected here, not news)
             logging.getLogger("pickplace.sim.controller").setLevel(logging.ERROR)
-            s = load_settings("sim", overrides={"logging": {"file": None}, "grpc": {"robot_port": 0},
-                                                "zenoh": {"listen": [f"tcp/127.0.0.1:{free_loopback_port()}"]}})
-            async with build_sim_server(s, "kinematic", ports={"dashboard": 0, "feedback": 0, "slow": 0}) as sim:
-                r = s.robot.model_copy(update={"dashboard_port": sim.ports["dashboard"],
-                                               "feedback_port": sim.ports["feedback"]})
+            s = load_settings(
+                "sim",
+                overrides={
+                    "logging": {"file": None},
+                    "grpc": {"robot_port": 0},
+                    "zenoh": {"listen": [f"tcp/127.0.0.1:{free_loopback_port()}"]},
+                },
+            )
+            async with build_sim_server(
+                s, "kinematic", ports={"dashboard": 0, "feedback": 0, "slow": 0}
+            ) as sim:
+                r = s.robot.model_copy(
+                    update={"dashboard_port": sim.ports["dashboard"], "feedback_port": sim.ports["feedback"]}
+                )
                 s = s.model_copy(update={"robot": r})
                 async with Bus(s.zenoh) as bus, RobotService(s, bus, grpc_port=0) as robot:
                     await robot.driver.enable()

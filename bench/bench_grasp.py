@@ -81,7 +81,8 @@ def execute_plan_in_twin(engine: object, plan: PickPlan) -> dict[str, float]:
                 dist = float(np.linalg.norm(T_end[:3, 3] - T0[:3, 3]))
                 drop = w.guard.force_drop_n
                 touched = arm.move_linear(
-                    T_end, dist / w.guard.speed_m_s,
+                    T_end,
+                    dist / w.guard.speed_m_s,
                     stop=lambda s, ref=fz_ref, drop=drop: s.tcp_force[2] - ref > drop,  # type: ignore[misc]
                 )
                 out["touch_detected"] = float(touched)
@@ -115,8 +116,12 @@ def _compute_grasps(settings: Settings) -> None:
     home = np.radians(settings.grasp.safe_home_joints_deg[spec.name])
     R_lying = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
     objs = {
-        "cylinder (lying rod)": ObjectSpec.from_request("cylinder", pose(R_lying, [0.45, 0.0, 0.011]), 0.022, 0, 0.2),
-        "box (50 mm cube)": ObjectSpec.from_request("box", pose(rotation_z(0.3), [0.5, -0.1, 0.025]), 0.05, 0.05, 0.05),
+        "cylinder (lying rod)": ObjectSpec.from_request(
+            "cylinder", pose(R_lying, [0.45, 0.0, 0.011]), 0.022, 0, 0.2
+        ),
+        "box (50 mm cube)": ObjectSpec.from_request(
+            "box", pose(rotation_z(0.3), [0.5, -0.1, 0.025]), 0.05, 0.05, 0.05
+        ),
         "sphere (60 mm)": ObjectSpec.from_request("sphere", pose(np.eye(3), [0.5, 0.1, 0.03]), 0.06, 0, 0),
     }
     check = MotionCollisionCheck.from_settings(settings, _wall(settings))
@@ -127,8 +132,10 @@ def _compute_grasps(settings: Settings) -> None:
             res = compute_grasps(obj, spec, T_ft, home, settings.grasp, settings.gripper.stroke_m, check)
             t.append(time.perf_counter() - t0)
         best = res.grasps[0] if res.grasps else None
-        print(f"ComputeGrasps {name}: {res.summary()}; best quality {best.quality if best else 0:.3f} "
-              f"eps {best.epsilon if best else 0:.4f}; {_pct(t)}")
+        print(
+            f"ComputeGrasps {name}: {res.summary()}; best quality {best.quality if best else 0:.3f} "
+            f"eps {best.epsilon if best else 0:.4f}; {_pct(t)}"
+        )
 
 
 def _rod_planning(settings: Settings, n: int = 100) -> None:
@@ -143,30 +150,48 @@ def _rod_planning(settings: Settings, n: int = 100) -> None:
     lo, hi = np.asarray(wall.min)[:2] - sc.min_gap_m, np.asarray(wall.max)[:2] + sc.min_gap_m
     rods: list[RodObservation] = []
     while len(rods) < n:  # like the twin's scenes: the rod keeps min_gap from the wall
-        x, y = rng.uniform(sc.pick_zone_min_m[0], sc.pick_zone_max_m[0]), rng.uniform(sc.pick_zone_min_m[1], sc.pick_zone_max_m[1])
+        x, y = (
+            rng.uniform(sc.pick_zone_min_m[0], sc.pick_zone_max_m[0]),
+            rng.uniform(sc.pick_zone_min_m[1], sc.pick_zone_max_m[1]),
+        )
         yaw = rng.uniform(-np.pi, np.pi)
         a = np.array([np.cos(yaw), np.sin(yaw)])
         pts = np.array([x, y]) + np.linspace(-0.5, 0.5, 11)[:, None] * sc.rod_length_m * a
         if np.any(np.all((pts > lo) & (pts < hi), axis=1)):
             continue
-        rods.append(RodObservation.create([x, y, sc.rod_diameter_m / 2], [a[0], a[1], 0.0],
-                                          sc.rod_length_m, sc.rod_diameter_m))
+        rods.append(
+            RodObservation.create(
+                [x, y, sc.rod_diameter_m / 2], [a[0], a[1], 0.0], sc.rod_length_m, sc.rod_diameter_m
+            )
+        )
     for rod in rods:
         t0 = time.perf_counter()
         try:
-            p = plan_pick_and_stand(spec, rod, home, settings.grasp, T_ft, settings.gripper.stroke_m,
-                                    q_home=home, collision_check=check)
+            p = plan_pick_and_stand(
+                spec,
+                rod,
+                home,
+                settings.grasp,
+                T_ft,
+                settings.gripper.stroke_m,
+                q_home=home,
+                collision_check=check,
+            )
             lifts.append(float(p.notes["lift_m"]))
             clear.append(float(p.notes["min_rod_clearance_m"]))
         except Exception as exc:
             fails.append(f"{type(exc).__name__}: {str(exc)[:120]}")
         t.append(time.perf_counter() - t0)
-    print(f"rod pick-and-stand planning, {n} random rods in the pick zone (with collision checks): "
-          f"{n - len(fails)}/{n} feasible; {_pct(t)}")
+    print(
+        f"rod pick-and-stand planning, {n} random rods in the pick zone (with collision checks): "
+        f"{n - len(fails)}/{n} feasible; {_pct(t)}"
+    )
     if lifts:
-        print(f"  lift {np.median(lifts):.3f} m; smallest rod-end clearance in the turn "
-              f"(rod lengthened by the ±{settings.grasp.rod.offset_tolerance_m * 1000:.0f} mm grasp tolerance) "
-              f"{min(clear) * 1000:.1f} mm")
+        print(
+            f"  lift {np.median(lifts):.3f} m; smallest rod-end clearance in the turn "
+            f"(rod lengthened by the ±{settings.grasp.rod.offset_tolerance_m * 1000:.0f} mm grasp tolerance) "
+            f"{min(clear) * 1000:.1f} mm"
+        )
     for f in fails[:3]:
         print(f"  failed: {f}")
 
@@ -181,12 +206,22 @@ def _cube_planning(settings: Settings) -> None:
     colors = list(settings.grasp.cubes.drop_zones_m)
     n = 20
     for k in range(n):
-        T = pose(rotation_z(rng.uniform(-np.pi, np.pi)), [rng.uniform(0.38, 0.58), rng.uniform(-0.2, 0.2), 0.025])
+        T = pose(
+            rotation_z(rng.uniform(-np.pi, np.pi)), [rng.uniform(0.38, 0.58), rng.uniform(-0.2, 0.2), 0.025]
+        )
         cube = CubeObservation.create(T, 0.05, colors[k % len(colors)])
         t0 = time.perf_counter()
         try:
-            plan_pick_and_place(spec, cube, home, settings.grasp, T_ft, settings.gripper.stroke_m, q_home=home,
-                                collision_check=check)
+            plan_pick_and_place(
+                spec,
+                cube,
+                home,
+                settings.grasp,
+                T_ft,
+                settings.gripper.stroke_m,
+                q_home=home,
+                collision_check=check,
+            )
             ok += 1
         except Exception as exc:
             print(f"  cube failed: {type(exc).__name__}: {str(exc)[:120]}")
@@ -198,8 +233,10 @@ def run_twin_trials(seeds: list[int]) -> list[dict[str, float]]:
     from services.sim.twin import create_twin_engine
     from services.sim.twin import ground_truth as gt
 
-    settings = load_settings("sim", overrides={"logging": {"file": None},
-                                               "sim": {"twin": {"scene": {"cubes": [], "obstacle": False}}}})
+    settings = load_settings(
+        "sim",
+        overrides={"logging": {"file": None}, "sim": {"twin": {"scene": {"cubes": [], "obstacle": False}}}},
+    )
     spec = get_robot(settings.robot.model)
     T_ft = tool_geometry(settings).T_flange_tool()
     home = np.radians(settings.grasp.safe_home_joints_deg[spec.name])
@@ -208,14 +245,19 @@ def run_twin_trials(seeds: list[int]) -> list[dict[str, float]]:
         engine = create_twin_engine(settings, seed=seed)
         rod = rod_from_twin(engine)
         t0 = time.perf_counter()
-        plan = plan_pick_and_stand(spec, rod, engine.state().q, settings.grasp, T_ft, settings.gripper.stroke_m,
-                                   q_home=home)
+        plan = plan_pick_and_stand(
+            spec, rod, engine.state().q, settings.grasp, T_ft, settings.gripper.stroke_m, q_home=home
+        )
         plan_s = time.perf_counter() - t0
         t0 = time.perf_counter()
         m = execute_plan_in_twin(engine, plan)
         stand = gt.evaluate_rod_standing(engine, "rod", settle_s=1.0)
-        m.update(success=float(stand.success), tilt_after_deg=stand.tilt_deg, plan_s=plan_s,
-                 wall_s=time.perf_counter() - t0)
+        m.update(
+            success=float(stand.success),
+            tilt_after_deg=stand.tilt_deg,
+            plan_s=plan_s,
+            wall_s=time.perf_counter() - t0,
+        )
         if not stand.success:
             m["reasons"] = "; ".join(stand.reasons)  # type: ignore[assignment]
         results.append(m)
@@ -230,11 +272,13 @@ def main() -> None:
     _cube_planning(settings)
     res = run_twin_trials(list(range(10)))
     ok = sum(r["success"] for r in res)
-    print(f"rod plans executed in the twin (10 seeded scenes, perfect perception): {ok}/10 stand; "
-          f"touch-down felt {sum(r['touch_detected'] for r in res):.0f}/10; "
-          f"max slip {max(r['slip_mm'] for r in res):.1f} mm / {max(r['slip_deg'] for r in res):.1f}°; "
-          f"tilt after release max {max(r['tilt_after_deg'] for r in res):.1f}°; "
-          f"sim time p50 {np.median([r['sim_time_s'] for r in res]):.1f} s, wall p50 {np.median([r['wall_s'] for r in res]):.1f} s")
+    print(
+        f"rod plans executed in the twin (10 seeded scenes, perfect perception): {ok}/10 stand; "
+        f"touch-down felt {sum(r['touch_detected'] for r in res):.0f}/10; "
+        f"max slip {max(r['slip_mm'] for r in res):.1f} mm / {max(r['slip_deg'] for r in res):.1f}°; "
+        f"tilt after release max {max(r['tilt_after_deg'] for r in res):.1f}°; "
+        f"sim time p50 {np.median([r['sim_time_s'] for r in res]):.1f} s, wall p50 {np.median([r['wall_s'] for r in res]):.1f} s"
+    )
     for r in res:
         if not r["success"]:
             print(f"  not standing: {r.get('reasons')}")

@@ -25,10 +25,18 @@ def _pct(xs: list[float]) -> str:
 
 async def _run() -> None:
     z1, z2 = free_loopback_port(), free_loopback_port()
-    s = load_settings("sim", overrides={"logging": {"file": None}, "zenoh": {"listen": [f"tcp/127.0.0.1:{z1}"]},
-                                        "grpc": {"robot_port": 0}})
+    s = load_settings(
+        "sim",
+        overrides={
+            "logging": {"file": None},
+            "zenoh": {"listen": [f"tcp/127.0.0.1:{z1}"]},
+            "grpc": {"robot_port": 0},
+        },
+    )
     async with build_sim_server(s, "kinematic", ports={"dashboard": 0, "feedback": 0, "slow": 0}) as sim:
-        r = s.robot.model_copy(update={"dashboard_port": sim.ports["dashboard"], "feedback_port": sim.ports["feedback"]})
+        r = s.robot.model_copy(
+            update={"dashboard_port": sim.ports["dashboard"], "feedback_port": sim.ports["feedback"]}
+        )
         s = s.model_copy(update={"robot": r})
 
         # 1. dashboard round trip (a separate client, like an operator tool)
@@ -61,7 +69,9 @@ async def _run() -> None:
                 stream.cancel()
                 print(f"gRPC StreamJointStates: {n / (time.perf_counter() - t0):.1f} msg/s")
                 print(f"  added latency driver → gRPC client: {_pct(lat_driver)}")
-                print(f"  feedback packet (controller TimeStamp, 1 ms resolution) → gRPC client: {_pct(lat_ctrl)}")
+                print(
+                    f"  feedback packet (controller TimeStamp, 1 ms resolution) → gRPC client: {_pct(lat_ctrl)}"
+                )
 
             # 3. Zenoh subscriber in a second session
             zs = s.zenoh.model_copy(update={"listen": [f"tcp/127.0.0.1:{z2}"], "connect": s.zenoh.listen})
@@ -80,7 +90,9 @@ async def _run() -> None:
                 sub.close()
                 print(f"Zenoh joint_states subscriber: {n / (time.perf_counter() - t0):.1f} msg/s")
                 print(f"  added latency driver → Zenoh subscriber: {_pct(lat_z)}")
-                print(f"  feedback packet (controller TimeStamp, 1 ms resolution) → Zenoh subscriber: {_pct(lat_zc)}")
+                print(
+                    f"  feedback packet (controller TimeStamp, 1 ms resolution) → Zenoh subscriber: {_pct(lat_zc)}"
+                )
 
 
 def main() -> None:

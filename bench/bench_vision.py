@@ -27,8 +27,14 @@ def _scenes(width: int, height: int, n: int, seed0: int = 1000) -> list:
     out = []
     for k in range(n):
         seed = seed0 + k
-        scene = random_scene(seed, n_rods=1, cube_colors=("red", "green", "blue", "black"), obstacle=True,
-                             dark_mat=k % 3 == 0, intrinsics=intr)
+        scene = random_scene(
+            seed,
+            n_rods=1,
+            cube_colors=("red", "green", "blue", "black"),
+            obstacle=True,
+            dark_mat=k % 3 == 0,
+            intrinsics=intr,
+        )
         out.append((scene, render_scene(scene, NoiseModel(), seed=seed).frame))
     return out
 
@@ -50,8 +56,13 @@ def _accuracy() -> dict[str, float]:
     rod_c, rod_a, cube_c, colour_ok, n_cubes, box_ok, n_boxes = [], [], [], 0, 0, 0, 0
     for k in range(N_ACCURACY):
         seed = 5000 + k
-        scene = random_scene(seed, n_rods=1, cube_colors=("red", "green", "blue", "black"), obstacle=k % 2 == 0,
-                             dark_mat=k % 3 == 0)
+        scene = random_scene(
+            seed,
+            n_rods=1,
+            cube_colors=("red", "green", "blue", "black"),
+            obstacle=k % 2 == 0,
+            dark_mat=k % 3 == 0,
+        )
         res = pipe.detect(render_scene(scene, NoiseModel(), seed=seed).frame, scene.T_base_camera)
         truth = scene.rods[0]
         if res.rods:
@@ -68,10 +79,14 @@ def _accuracy() -> dict[str, float]:
             box_ok += any(bool(np.all(b.contains(ob.corners()))) for b in res.obstacles)
     return {
         "rods_found": len(rod_c) / N_ACCURACY,
-        "rod_centre_median_mm": float(np.median(rod_c) * 1e3), "rod_centre_max_mm": float(np.max(rod_c) * 1e3),
-        "rod_axis_median_deg": float(np.median(rod_a)), "rod_axis_max_deg": float(np.max(rod_a)),
-        "cubes_found": len(cube_c) / n_cubes, "colour_correct": colour_ok / n_cubes,
-        "cube_centre_median_mm": float(np.median(cube_c) * 1e3), "cube_centre_max_mm": float(np.max(cube_c) * 1e3),
+        "rod_centre_median_mm": float(np.median(rod_c) * 1e3),
+        "rod_centre_max_mm": float(np.max(rod_c) * 1e3),
+        "rod_axis_median_deg": float(np.median(rod_a)),
+        "rod_axis_max_deg": float(np.max(rod_a)),
+        "cubes_found": len(cube_c) / n_cubes,
+        "colour_correct": colour_ok / n_cubes,
+        "cube_centre_median_mm": float(np.median(cube_c) * 1e3),
+        "cube_centre_max_mm": float(np.max(cube_c) * 1e3),
         "obstacle_boxes_containing": box_ok / max(n_boxes, 1),
     }
 
@@ -109,9 +124,11 @@ def _twin_accuracy() -> str:
                         colour_ok += res.cubes[int(np.argmin(d))].color_label == obj["color"]
     if not rod_c or not cube_c:
         return f"twin scenes: rods found {len(rod_c)}/{N_TWIN}, cubes found {len(cube_c)}/{n_cubes}"
-    return (f"twin scenes ({N_TWIN}, MuJoCo render + twin noise): rod centre max {max(rod_c) * 1e3:.2f} mm, "
-            f"axis max {max(rod_a):.2f}°; cubes found {len(cube_c)}/{n_cubes}, colour right {colour_ok}/{n_cubes}, "
-            f"centre max {max(cube_c) * 1e3:.2f} mm")
+    return (
+        f"twin scenes ({N_TWIN}, MuJoCo render + twin noise): rod centre max {max(rod_c) * 1e3:.2f} mm, "
+        f"axis max {max(rod_a):.2f}°; cubes found {len(cube_c)}/{n_cubes}, colour right {colour_ok}/{n_cubes}, "
+        f"centre max {max(cube_c) * 1e3:.2f} mm"
+    )
 
 
 def main() -> None:
@@ -127,11 +144,15 @@ def main() -> None:
             print(f"{width}x{height:<5} {name:>8} {np.median(ms):8.2f} {np.percentile(ms, 95):8.2f} {tgt:>8}")
     acc = _accuracy()
     print(f"accuracy over {N_ACCURACY} noisy scenes (0.5-0.9 m, holes on the rod, 1/3 on a black mat):")
-    print(f"  rod: found {acc['rods_found']:.0%}, centre median {acc['rod_centre_median_mm']:.2f} mm / "
-          f"max {acc['rod_centre_max_mm']:.2f} mm, axis median {acc['rod_axis_median_deg']:.2f}° / "
-          f"max {acc['rod_axis_max_deg']:.2f}°")
-    print(f"  cubes: found {acc['cubes_found']:.0%}, colour right {acc['colour_correct']:.0%}, centre median "
-          f"{acc['cube_centre_median_mm']:.2f} mm / max {acc['cube_centre_max_mm']:.2f} mm")
+    print(
+        f"  rod: found {acc['rods_found']:.0%}, centre median {acc['rod_centre_median_mm']:.2f} mm / "
+        f"max {acc['rod_centre_max_mm']:.2f} mm, axis median {acc['rod_axis_median_deg']:.2f}° / "
+        f"max {acc['rod_axis_max_deg']:.2f}°"
+    )
+    print(
+        f"  cubes: found {acc['cubes_found']:.0%}, colour right {acc['colour_correct']:.0%}, centre median "
+        f"{acc['cube_centre_median_mm']:.2f} mm / max {acc['cube_centre_max_mm']:.2f} mm"
+    )
     print(f"  obstacle box contains the obstacle: {acc['obstacle_boxes_containing']:.0%}")
     print(_twin_accuracy())
 

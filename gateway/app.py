@@ -90,7 +90,8 @@ class Cell:
             return
         msg = common_pb2.ConfigUpdate(
             header=common_pb2.Header(stamp_ns=time.time_ns()),
-            patch_json=json.dumps(self.config_patch, sort_keys=True), updated=updated,
+            patch_json=json.dumps(self.config_patch, sort_keys=True),
+            updated=updated,
         )
         try:
             self.bus.publish(CellKeys(self.settings.cell_id).config_updates, msg)
@@ -214,8 +215,14 @@ def create_app(
             cache.clear()
             for p in picks:
                 ev = p.event
-                metrics.observe_pick(ev.robot_id or gw.robot_id, ev.object_class, ev.success, ev.cycle_time_s,
-                                     ev.grasp_quality or None, ev.stage_reached)
+                metrics.observe_pick(
+                    ev.robot_id or gw.robot_id,
+                    ev.object_class,
+                    ev.success,
+                    ev.cycle_time_s,
+                    ev.grasp_quality or None,
+                    ev.stage_reached,
+                )
             metrics.picks_persisted.inc(len(picks))
             metrics.pick_buffer_depth.set(len(buffer))
             hub.on_picks([pick_json(p.id, p.event, gw.robot_id) for p in picks])
@@ -237,7 +244,9 @@ def create_app(
             clients = await stack.enter_async_context(CellClients(settings))
             calibration = CalibrationRuns(calibration_executor, sessions, gw.robot_id)
             stack.push_async_callback(calibration.close)
-            cell = Cell(settings, engine, sessions, display, hub, writer, clients, metrics, calibration, cache)
+            cell = Cell(
+                settings, engine, sessions, display, hub, writer, clients, metrics, calibration, cache
+            )
             app.state.cell = cell
             app.state.api_token = gw.api_token.get_secret_value() if gw.api_token else ""
 
@@ -266,9 +275,13 @@ def create_app(
                 await the_bus.__aenter__()
                 stack.push_async_callback(the_bus.__aexit__, None, None, None)
             feeds = BusFeeds(
-                the_bus, CellKeys(settings.cell_id),
-                on_task_status=on_task_status, on_joint_state=on_joint_state, on_robot_status=on_robot_status,
-                on_pick_event=on_pick_event, on_camera=hub.on_camera,
+                the_bus,
+                CellKeys(settings.cell_id),
+                on_task_status=on_task_status,
+                on_joint_state=on_joint_state,
+                on_robot_status=on_robot_status,
+                on_pick_event=on_pick_event,
+                on_camera=hub.on_camera,
             )
             feeds.start()
             stack.callback(feeds.close)
@@ -320,7 +333,14 @@ def create_app(
     from gateway.routers import calibration, config, live, picks, prometheus, system, web
     from gateway.routers import metrics as metrics_router
 
-    for r in (system.router, picks.router, metrics_router.router, calibration.router, config.router, live.router):
+    for r in (
+        system.router,
+        picks.router,
+        metrics_router.router,
+        calibration.router,
+        config.router,
+        live.router,
+    ):
         app.include_router(r, prefix=API_PREFIX)
     app.include_router(prometheus.router)
     if serve_web:
@@ -329,7 +349,9 @@ def create_app(
     app.add_middleware(SecurityHeaders, api_prefix=API_PREFIX)
     if gw.cors_origins:
         app.add_middleware(
-            CORSMiddleware, allow_origins=gw.cors_origins, allow_methods=["GET", "POST", "PUT"],
+            CORSMiddleware,
+            allow_origins=gw.cors_origins,
+            allow_methods=["GET", "POST", "PUT"],
             allow_headers=["Authorization", "Content-Type"],
         )
     app.add_middleware(BodySizeLimit, max_bytes=gw.max_request_bytes)

@@ -74,8 +74,16 @@ class CalibrationRuns:
             raise ExecutionError(f"calibration {running.run_id} is still running ({running.progress:.0%})")
         run = CalibrationRun(uuid.uuid4().hex[:12], num_poses, datetime.now(UTC))
         async with self.sessions() as s:
-            s.add(Calibration(run_id=run.run_id, timestamp=run.started_at, robot_id=self.robot_id,
-                              calibration_type="hand_eye", status="running", num_poses=num_poses))
+            s.add(
+                Calibration(
+                    run_id=run.run_id,
+                    timestamp=run.started_at,
+                    robot_id=self.robot_id,
+                    calibration_type="hand_eye",
+                    status="running",
+                    num_poses=num_poses,
+                )
+            )
             await s.commit()
         self.runs[run.run_id] = run
         run.task = asyncio.create_task(self._run(run), name=f"gateway-calibration-{run.run_id}")

@@ -97,6 +97,8 @@ def current(profile: ProfileOpt = None, config: ConfigOpt = None) -> None:
     if rev == head:
         console.print(f"database {where}: revision [green]{rev}[/green] (up to date)")
     else:
-        console.print(f"database {where}: revision [yellow]{rev or 'none'}[/yellow], newest is {head}: "
-                      "run `pickplace db upgrade`")
+        console.print(
+            f"database {where}: revision [yellow]{rev or 'none'}[/yellow], newest is {head}: "
+            "run `pickplace db upgrade`"
+        )
         raise typer.Exit(1)

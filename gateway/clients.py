@@ -40,7 +40,9 @@ def open_channel(host: str, port: int) -> grpc.aio.Channel:
 
 
 @contextlib.contextmanager
-def _relay_errors(service: str, target: str, ch: grpc.aio.Channel | None = None, timeout_s: float = 0.0) -> Any:
+def _relay_errors(
+    service: str, target: str, ch: grpc.aio.Channel | None = None, timeout_s: float = 0.0
+) -> Any:
     """Map gRPC failures to pickplace errors; an unreachable service is named with its address."""
     try:
         yield
@@ -50,7 +52,9 @@ def _relay_errors(service: str, target: str, ch: grpc.aio.Channel | None = None,
         if code in UNREACHABLE and isinstance(err, RobotCommunicationError):
             connected = ch is not None and ch.get_state() == grpc.ChannelConnectivity.READY
             if code == grpc.StatusCode.DEADLINE_EXCEEDED and connected:
-                raise RobotCommunicationError(f"{service} at {target} did not answer within {timeout_s:g} s") from exc
+                raise RobotCommunicationError(
+                    f"{service} at {target} did not answer within {timeout_s:g} s"
+                ) from exc
             raise RobotCommunicationError(
                 f"{service} unreachable at {target} ({code.name}: {exc.details()})"
             ) from exc
@@ -106,13 +110,17 @@ class CellClients:
         assert self.task is not None
         with _relay_errors("task service", self.task_target, self.task_channel, self.timeout_s):
             return await self.task.Start(
-                task_pb2.StartTaskRequest(task=task, cycles=cycles), timeout=self.timeout_s, wait_for_ready=True
+                task_pb2.StartTaskRequest(task=task, cycles=cycles),
+                timeout=self.timeout_s,
+                wait_for_ready=True,
             )
 
     async def stop_task(self) -> common_pb2.CommandResponse:
         assert self.task is not None
         with _relay_errors("task service", self.task_target, self.task_channel, self.timeout_s):
-            return await self.task.Stop(task_pb2.StopTaskRequest(), timeout=self.timeout_s, wait_for_ready=True)
+            return await self.task.Stop(
+                task_pb2.StopTaskRequest(), timeout=self.timeout_s, wait_for_ready=True
+            )
 
     async def task_status(self) -> task_pb2.TaskStatus:
         assert self.task is not None
@@ -130,7 +138,9 @@ class CellClients:
     ) -> common_pb2.CommandResponse:
         """Press the e-stop on the robot driver; tell the task service in the background."""
         assert self.estop_robot is not None
-        notify = asyncio.create_task(self._notify_task_estop(on_task_result), name="gateway-estop-task-notify")
+        notify = asyncio.create_task(
+            self._notify_task_estop(on_task_result), name="gateway-estop-task-notify"
+        )
         self._background.add(notify)
         notify.add_done_callback(self._background.discard)
         # wait_for_ready: a channel still backing off after a driver restart waits (up to the timeout)
@@ -158,6 +168,8 @@ class CellClients:
         """Release the software e-stop, clear the alarms and enable the arm again."""
         assert self.robot is not None
         with _relay_errors("robot driver", self.robot_target):
-            await self.robot.EmergencyStop(robot_pb2.EmergencyStopRequest(release=True), timeout=self.timeout_s)
+            await self.robot.EmergencyStop(
+                robot_pb2.EmergencyStopRequest(release=True), timeout=self.timeout_s
+            )
             await self.robot.ClearError(robot_pb2.ClearErrorRequest(), timeout=self.timeout_s)
             await self.robot.Enable(robot_pb2.EnableRequest(), timeout=self.timeout_s * 3)

@@ -45,7 +45,9 @@ class TokenAuthInterceptor(grpc.aio.ServerInterceptor):
         if handler is None or token_matches(presented, self._token):
             return handler
         message = (
-            "missing 'authorization: Bearer <token>' metadata" if presented is None else "bearer token is not valid"
+            "missing 'authorization: Bearer <token>' metadata"
+            if presented is None
+            else "bearer token is not valid"
         )
 
         async def deny_unary(request: Any, context: grpc.aio.ServicerContext) -> Any:
@@ -59,7 +61,9 @@ class TokenAuthInterceptor(grpc.aio.ServerInterceptor):
             return grpc.unary_stream_rpc_method_handler(
                 deny_stream, handler.request_deserializer, handler.response_serializer
             )
-        return grpc.unary_unary_rpc_method_handler(deny_unary, handler.request_deserializer, handler.response_serializer)
+        return grpc.unary_unary_rpc_method_handler(
+            deny_unary, handler.request_deserializer, handler.response_serializer
+        )
 
 
 async def _passthrough(context: grpc.aio.ServicerContext, exc: grpc.aio.AioRpcError) -> None:
@@ -81,7 +85,9 @@ class RobotControllerRelay(robot_pb2_grpc.RobotControllerServicer):
         remaining = context.time_remaining()
         return min(remaining, self._max_timeout_s) if remaining is not None else self._max_timeout_s
 
-    async def _unary(self, name: str, request: Any, context: grpc.aio.ServicerContext, estop: bool = False) -> Any:
+    async def _unary(
+        self, name: str, request: Any, context: grpc.aio.ServicerContext, estop: bool = False
+    ) -> Any:
         clients = self._cell.clients
         stub = clients.estop_robot if estop else clients.robot
         try:
@@ -147,7 +153,8 @@ class CellMetricsServicer(gateway_pb2_grpc.CellMetricsServicer):
         while True:
             seq += 1
             sample = gateway_pb2.MetricsSample(
-                header=common_pb2.Header(stamp_ns=time.time_ns(), seq=seq), state=await self._status(),
+                header=common_pb2.Header(stamp_ns=time.time_ns(), seq=seq),
+                state=await self._status(),
                 database_ok=self._cell.writer.database_ok,
             )
             try:

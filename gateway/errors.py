@@ -81,7 +81,9 @@ def install(app: FastAPI) -> None:
     async def _http(_req: Request, exc: StarletteHTTPException) -> JSONResponse:
         name = HTTP_ERROR_NAMES.get(exc.status_code, "HTTPError")
         return JSONResponse(
-            error_body(name, str(exc.detail)), status_code=exc.status_code, headers=getattr(exc, "headers", None)
+            error_body(name, str(exc.detail)),
+            status_code=exc.status_code,
+            headers=getattr(exc, "headers", None),
         )
 
     @app.exception_handler(sa_exc.SQLAlchemyError)
@@ -90,7 +92,9 @@ def install(app: FastAPI) -> None:
         if isinstance(exc, sa_exc.OperationalError | sa_exc.InterfaceError | sa_exc.TimeoutError) or (
             isinstance(exc, sa_exc.DBAPIError) and exc.connection_invalidated
         ):
-            return JSONResponse(error_body("DatabaseUnavailable", f"database unavailable: {text}"), status_code=503)
+            return JSONResponse(
+                error_body("DatabaseUnavailable", f"database unavailable: {text}"), status_code=503
+            )
         log.error("database error: %s", text)
         return JSONResponse(error_body("DatabaseError", text), status_code=500)
 
@@ -98,7 +102,8 @@ def install(app: FastAPI) -> None:
     async def _connection(_req: Request, exc: ConnectionError) -> JSONResponse:
         # asyncpg raises OSError (connection refused) before SQLAlchemy can wrap it
         return JSONResponse(
-            error_body("DatabaseUnavailable", f"database unavailable: {type(exc).__name__}: {exc}"), status_code=503
+            error_body("DatabaseUnavailable", f"database unavailable: {type(exc).__name__}: {exc}"),
+            status_code=503,
         )
 
     @app.exception_handler(Exception)

@@ -62,7 +62,9 @@ class BusFeeds:
         for key, msg_type, handler in self._routes:
             self._subs.append(self._bus.subscribe_callback(key, self._callback(msg_type, handler)))
 
-    def _callback(self, msg_type: type[Message] | None, handler: Callable[[Any], None]) -> Callable[[str, bytes], None]:
+    def _callback(
+        self, msg_type: type[Message] | None, handler: Callable[[Any], None]
+    ) -> Callable[[str, bytes], None]:
         def on_sample(key: str, payload: bytes) -> None:  # on a Zenoh thread
             if msg_type is None:
                 if not payload.startswith(JPEG_MAGIC):

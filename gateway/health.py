@@ -17,7 +17,10 @@ def gpu_sample() -> tuple[float | None, float | None]:
     try:
         out = subprocess.run(
             [exe, "--query-gpu=utilization.gpu,memory.used", "--format=csv,noheader,nounits"],
-            capture_output=True, text=True, timeout=2.0, check=True,
+            capture_output=True,
+            text=True,
+            timeout=2.0,
+            check=True,
         ).stdout.splitlines()[0]
         util, mem = (float(v) for v in out.split(","))
         return util, mem

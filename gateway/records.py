@@ -27,6 +27,6 @@ def pick_detail(row: Pick) -> PickDetail:
 def pick_json(db_id: int, ev: task_pb2.PickEvent, default_robot_id: str) -> dict[str, Any]:
     row = pick_row(ev, default_robot_id)
     fields = set(PickRecord.model_fields)
-    return PickRecord.model_validate({"id": db_id, **{k: v for k, v in row.items() if k in fields}}).model_dump(
-        mode="json"
-    )
+    return PickRecord.model_validate(
+        {"id": db_id, **{k: v for k, v in row.items() if k in fields}}
+    ).model_dump(mode="json")

@@ -63,7 +63,9 @@ class BodySizeLimit:
                 try:
                     length = int(value)
                 except ValueError:
-                    await self._reply(send, 400, f"Content-Length {value.decode(errors='replace')!r} is not a number")
+                    await self._reply(
+                        send, 400, f"Content-Length {value.decode(errors='replace')!r} is not a number"
+                    )
                     return
                 if length > self.max_bytes:
                     await self._reply(send, 413, self._too_large(length))
@@ -101,8 +103,13 @@ class BodySizeLimit:
 
     @staticmethod
     async def _reply(send: Send, code: int, detail: str) -> None:
-        body = json.dumps({"error": "RequestTooLarge" if code == 413 else "BadRequest", "detail": detail}).encode()
-        headers: list[Any] = [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]
+        body = json.dumps(
+            {"error": "RequestTooLarge" if code == 413 else "BadRequest", "detail": detail}
+        ).encode()
+        headers: list[Any] = [
+            (b"content-type", b"application/json"),
+            (b"content-length", str(len(body)).encode()),
+        ]
         await send({"type": "http.response.start", "status": code, "headers": headers})
         await send({"type": "http.response.body", "body": body})
 
@@ -132,7 +139,10 @@ class SecurityHeaders:
         async def add_headers(msg: Message) -> None:
             if msg["type"] == "http.response.start":
                 present = {k.lower() for k, _ in msg.get("headers", [])}
-                msg["headers"] = [*msg.get("headers", []), *((k, v) for k, v in extra.items() if k not in present)]
+                msg["headers"] = [
+                    *msg.get("headers", []),
+                    *((k, v) for k, v in extra.items() if k not in present),
+                ]
             await send(msg)
 
         await self.app(scope, receive, add_headers)

@@ -72,8 +72,9 @@ class GatewayServer:
         self._server = _Server(config)
         self._task = asyncio.create_task(self._serve(sock), name="gateway-http")
         ready = asyncio.create_task(self.app.state.ready.wait())
-        done, _ = await asyncio.wait({self._task, ready}, timeout=STARTUP_TIMEOUT_S,
-                                     return_when=asyncio.FIRST_COMPLETED)
+        done, _ = await asyncio.wait(
+            {self._task, ready}, timeout=STARTUP_TIMEOUT_S, return_when=asyncio.FIRST_COMPLETED
+        )
         if ready not in done:
             ready.cancel()
             await self._stop()
@@ -138,8 +139,9 @@ def dashboard_url(server: GatewayServer, token: str | None = None) -> str:
 
 
 @contextlib.asynccontextmanager
-async def embedded_gateway(settings: Settings, bus: Any,
-                           calibration_executor: Any = None) -> AsyncIterator[tuple[GatewayServer, str]]:
+async def embedded_gateway(
+    settings: Settings, bus: Any, calibration_executor: Any = None
+) -> AsyncIterator[tuple[GatewayServer, str]]:
     """The gateway inside ``pickplace up``: shares the cell's Zenoh bus, SQLite migrated on start,
     a generated token. Yields the server and the dashboard URL to print (token in its fragment)."""
     from gateway.app import create_app

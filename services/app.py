@@ -31,8 +31,13 @@ from services.task.states import PickOutcome, TaskCounters
 log = logging.getLogger("pickplace.app")
 
 
-async def run_all_in_one(settings: Settings, cycles: int = 0, engine: str | None = None,
-                         console: Console | None = None, job: str = "pick") -> object:
+async def run_all_in_one(
+    settings: Settings,
+    cycles: int = 0,
+    engine: str | None = None,
+    console: Console | None = None,
+    job: str = "pick",
+) -> object:
     console = console or Console()
     if job == "keypose":
         return await run_keypose_demo(settings, cycles or 2, engine or "kinematic", console)
@@ -44,16 +49,30 @@ def _status_table(runner, started: float, last: PickOutcome | None) -> Group:  #
     c: TaskCounters = runner.counters
     n = c.picks_completed + c.picks_failed
     t = Table.grid(padding=(0, 2))
-    t.add_row("task", f"[bold]{runner.task}[/bold]", "state", f"[cyan]{runner.state.value}[/cyan] {runner.message[:48]}")
-    t.add_row("cycles", str(n), "success", f"{c.picks_completed}/{n} ({100 * c.success_rate:.0f} %)" if n else "-")
-    t.add_row("avg cycle", f"{c.average_cycle_time:.1f} s" if c.cycle_times_s else "-",
-              "running for", f"{time.perf_counter() - started:.0f} s")
+    t.add_row(
+        "task",
+        f"[bold]{runner.task}[/bold]",
+        "state",
+        f"[cyan]{runner.state.value}[/cyan] {runner.message[:48]}",
+    )
+    t.add_row(
+        "cycles", str(n), "success", f"{c.picks_completed}/{n} ({100 * c.success_rate:.0f} %)" if n else "-"
+    )
+    t.add_row(
+        "avg cycle",
+        f"{c.average_cycle_time:.1f} s" if c.cycle_times_s else "-",
+        "running for",
+        f"{time.perf_counter() - started:.0f} s",
+    )
     lines = [t]
     if last is not None:
         colour = "green" if last.success else "red"
-        lines.append(Text.from_markup(
-            f"last: [{colour}]{'success' if last.success else 'failed'}[/{colour}] in {last.cycle_time_s:.1f} s"
-            + ("" if last.success else f" — {last.stage_reached}: {last.failure_reason[:90]}")))
+        lines.append(
+            Text.from_markup(
+                f"last: [{colour}]{'success' if last.success else 'failed'}[/{colour}] in {last.cycle_time_s:.1f} s"
+                + ("" if last.success else f" — {last.stage_reached}: {last.failure_reason[:90]}")
+            )
+        )
     return Group(*lines)
 
 
@@ -62,9 +81,13 @@ async def run_pick_cell(settings: Settings, cycles: int, console: Console) -> Ta
     last: list[PickOutcome] = []
     from gateway.server import embedded_gateway
 
-    async with Cell(settings, engine="twin") as cell, embedded_gateway(
-        cell.settings, cell.bus, calibration_executor=_calibration_executor(cell)
-    ) as (_gw, url):
+    async with (
+        Cell(settings, engine="twin") as cell,
+        embedded_gateway(cell.settings, cell.bus, calibration_executor=_calibration_executor(cell)) as (
+            _gw,
+            url,
+        ),
+    ):
         runner = cell.task.runner  # type: ignore[union-attr]
         runner.listeners.append(last.append)
         s = cell.settings
@@ -106,14 +129,25 @@ def _calibration_executor(cell: Cell):  # type: ignore[no-untyped-def]
         cal = s.vision.calibration.model_copy(update={"n_poses": num_poses})
         guess = cell.vision.T_base_camera  # type: ignore[union-attr]
         if guess is None:
-            raise InvalidInputError("calibration needs a rough camera pose: write one with `pickplace calibrate-manual`")
+            raise InvalidInputError(
+                "calibration needs a rough camera pose: write one with `pickplace calibrate-manual`"
+            )
         async with GrpcCalibrationRobot(s, speed_ratio=30) as robot:
-            result, _data = await run_calibration(robot, cell.vision.camera, cal, guess,  # type: ignore[union-attr]
-                                                  progress=lambda done, total, msg: progress(done / max(total, 1), msg))
+            result, _data = await run_calibration(
+                robot,
+                cell.vision.camera,
+                cal,
+                guess,  # type: ignore[union-attr]
+                progress=lambda done, total, msg: progress(done / max(total, 1), msg),
+            )
         return CalibrationOutcome(
-            parameters={"T_base_camera": result.T_base_camera.tolist(), "poses_used": result.n_poses,
-                        "method": result.method, "translation_rms_m": result.translation_rms_m,
-                        "rotation_rms_deg": result.rotation_rms_deg},
+            parameters={
+                "T_base_camera": result.T_base_camera.tolist(),
+                "poses_used": result.n_poses,
+                "method": result.method,
+                "translation_rms_m": result.translation_rms_m,
+                "rotation_rms_deg": result.rotation_rms_deg,
+            },
             reprojection_error=result.reprojection_rms_px,
             notes="eye-to-hand, ChArUco board held by the gripper",
         )
@@ -146,27 +180,37 @@ async def run_keypose_demo(settings: Settings, cycles: int, engine: str, console
     async with build_sim_server(settings, engine) as sim:
         r = settings.robot
         settings = settings.model_copy(
-            update={"robot": r.model_copy(update={"dashboard_port": sim.ports["dashboard"],
-                                                  "feedback_port": sim.ports["feedback"]})}
+            update={
+                "robot": r.model_copy(
+                    update={"dashboard_port": sim.ports["dashboard"], "feedback_port": sim.ports["feedback"]}
+                )
+            }
         )
         async with Bus(settings.zenoh) as bus, RobotService(settings, bus) as svc:
-            console.print(f"key-pose cycle on the simulated {settings.robot.model} ({engine}); gRPC "
-                          f"{settings.grpc.host}:{svc.grpc_port}, Zenoh {settings.zenoh.listen}")
+            console.print(
+                f"key-pose cycle on the simulated {settings.robot.model} ({engine}); gRPC "
+                f"{settings.grpc.host}:{svc.grpc_port}, Zenoh {settings.zenoh.listen}"
+            )
             await svc.driver.enable()
 
             def show(ev: CycleEvent) -> None:
-                console.print(f"cycle {ev.cycle} [{ev.step}/{ev.steps}] → [bold]{ev.pose:<10}[/bold] "
-                              f"in {ev.duration_s:5.2f}s (error {ev.position_error_deg:.3f}°)")
+                console.print(
+                    f"cycle {ev.cycle} [{ev.step}/{ev.steps}] → [bold]{ev.pose:<10}[/bold] "
+                    f"in {ev.duration_s:5.2f}s (error {ev.position_error_deg:.3f}°)"
+                )
 
             try:
                 for _ in itertools.islice(itertools.count(), cycles):
                     # svc.settings follows PUT /config: a changed cycle or speed applies from the next cycle
-                    rep = await run_keypose_cycle(svc.driver, svc.settings.cycle, 1, svc.settings.robot.speed_ratio,
-                                                  show)
+                    rep = await run_keypose_cycle(
+                        svc.driver, svc.settings.cycle, 1, svc.settings.robot.speed_ratio, show
+                    )
                     total.cycles += rep.cycles
                     total.moves += rep.moves
                     total.cycle_times_s += rep.cycle_times_s
-                    total.max_position_error_deg = max(total.max_position_error_deg, rep.max_position_error_deg)
+                    total.max_position_error_deg = max(
+                        total.max_position_error_deg, rep.max_position_error_deg
+                    )
             finally:
                 t = Table(title="summary")
                 t.add_column("metric")

@@ -35,8 +35,14 @@ def with_updates(settings: Settings, **sections: dict[str, Any]) -> Settings:
 
 
 class Cell:
-    def __init__(self, settings: Settings, engine: str = "twin", seed: int | None = None,
-                 perfect_calibration: bool = False, calibration_error: tuple[float, float] | None = None):
+    def __init__(
+        self,
+        settings: Settings,
+        engine: str = "twin",
+        seed: int | None = None,
+        perfect_calibration: bool = False,
+        calibration_error: tuple[float, float] | None = None,
+    ):
         self.settings = settings
         self.engine_name = engine
         self.seed = settings.sim.seed if seed is None else seed
@@ -70,8 +76,13 @@ class Cell:
         s = with_updates(self.settings, sim={"seed": self.seed, "engine": self.engine_name})
         self.sim = build_sim_server(s, self.engine_name)
         await self._stack.enter_async_context(self.sim)
-        s = with_updates(s, robot={"dashboard_port": self.sim.ports["dashboard"],
-                                   "feedback_port": self.sim.ports["feedback"]})
+        s = with_updates(
+            s,
+            robot={
+                "dashboard_port": self.sim.ports["dashboard"],
+                "feedback_port": self.sim.ports["feedback"],
+            },
+        )
         self.bus = Bus(s.zenoh)
         await self._stack.enter_async_context(self.bus)
         self.robot = RobotService(s, self.bus)
@@ -88,18 +99,33 @@ class Cell:
         self._stack.push_async_callback(self._stop_servers)
         camera = self._camera()
         self._stack.push_async_callback(self._close_camera)  # after the vision service has stopped
-        self.vision = VisionService(s, self.bus, camera=camera, T_base_camera=self._calibration(s),
-                                    publish_loop=True)
+        self.vision = VisionService(
+            s, self.bus, camera=camera, T_base_camera=self._calibration(s), publish_loop=True
+        )
         await self._stack.enter_async_context(self.vision)
-        s = with_updates(s, grpc={"robot_port": self.robot.grpc_port, "motion_port": motion_port,
-                                  "grasp_port": grasp_port, "vision_port": self.vision.grpc_port})
+        s = with_updates(
+            s,
+            grpc={
+                "robot_port": self.robot.grpc_port,
+                "motion_port": motion_port,
+                "grasp_port": grasp_port,
+                "vision_port": self.vision.grpc_port,
+            },
+        )
         self.task = TaskService(s, self.bus)
         await self._stack.enter_async_context(self.task)
         s = with_updates(s, grpc={"task_port": self.task.grpc_port})
         self.task.runner.between_cycles = self.next_scene if s.task.reset_scene_each_cycle else None
         self.settings = s
-        log.info("cell up: sim %s, grpc robot %d motion %d grasp %d vision %d task %d", self.sim.ports,
-                 self.robot.grpc_port, motion_port, grasp_port, self.vision.grpc_port, self.task.grpc_port)
+        log.info(
+            "cell up: sim %s, grpc robot %d motion %d grasp %d vision %d task %d",
+            self.sim.ports,
+            self.robot.grpc_port,
+            motion_port,
+            grasp_port,
+            self.vision.grpc_port,
+            self.task.grpc_port,
+        )
 
     async def _on_config(self, new: Settings, changed: list[str]) -> None:
         """PUT /config for the parts of the cell this object holds: the motion planner's settings at
@@ -147,7 +173,9 @@ class Cell:
             ax = rng.normal(size=3)
             T = T.copy()
             T[:3, 3] += err_m * d / np.linalg.norm(d)
-            T[:3, :3] = Rotation.from_rotvec(np.deg2rad(err_deg) * ax / np.linalg.norm(ax)).as_matrix() @ T[:3, :3]
+            T[:3, :3] = (
+                Rotation.from_rotvec(np.deg2rad(err_deg) * ax / np.linalg.norm(ax)).as_matrix() @ T[:3, :3]
+            )
         return T
 
     async def reset_scene(self, seed: int) -> None:

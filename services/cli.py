@@ -54,8 +54,6 @@ def _settings(
     return s
 
 
-
-
 def _run(coro: Coroutine[Any, Any, Any]) -> Any:
     """Run a coroutine; Ctrl-C cancels it cleanly; pickplace errors exit 1 with their message."""
 
@@ -81,7 +79,9 @@ def up(
     task: Annotated[str, typer.Option(help="stand-rod | sort-cubes")] = "",
     seed: Annotated[int | None, typer.Option(help="first twin scene seed")] = None,
     job: Annotated[str, typer.Option(help="pick (the cell) | keypose (seed 003's demo cycle)")] = "pick",
-    processes: Annotated[bool, typer.Option("--processes", help="every service as its own OS process")] = False,
+    processes: Annotated[
+        bool, typer.Option("--processes", help="every service as its own OS process")
+    ] = False,
 ) -> None:
     """Run the whole cell: in one process (default) or as separate processes on loopback."""
     from services.app import run_all_in_one
@@ -122,10 +122,14 @@ def evaluate(
         raise typer.Exit(2)
     # a self-contained run: free loopback ports, so it never collides with a running cell
     zport = free_loopback_port()
-    s = _settings(profile, config, console_log=False,
-                  sim={"speed": speed, "dashboard_port": 0, "feedback_port": 0, "slow_feedback_port": 0},
-                  grpc={"robot_port": 0, "motion_port": 0, "grasp_port": 0, "vision_port": 0, "task_port": 0},
-                  zenoh={"listen": [f"tcp/127.0.0.1:{zport}"]})
+    s = _settings(
+        profile,
+        config,
+        console_log=False,
+        sim={"speed": speed, "dashboard_port": 0, "feedback_port": 0, "slow_feedback_port": 0},
+        grpc={"robot_port": 0, "motion_port": 0, "grasp_port": 0, "vision_port": 0, "task_port": 0},
+        zenoh={"listen": [f"tcp/127.0.0.1:{zport}"]},
+    )
     s.logging.level = "WARNING"
     setup_logging(s.logging, console=True)
     error = None
@@ -156,9 +160,13 @@ def sim_dobot(
     feedback_port: Annotated[int | None, typer.Option()] = None,
     frames: Annotated[
         bool | None,
-        typer.Option("--frames/--no-frames", help="publish the twin camera on Zenoh (default: on with the twin)"),
+        typer.Option(
+            "--frames/--no-frames", help="publish the twin camera on Zenoh (default: on with the twin)"
+        ),
     ] = None,
-    frame_rate: Annotated[float, typer.Option(help="camera frames per second on Zenoh (0 = vision.rate_hz)")] = 0.0,
+    frame_rate: Annotated[
+        float, typer.Option(help="camera frames per second on Zenoh (0 = vision.rate_hz)")
+    ] = 0.0,
 ) -> None:
     """Run a simulated Nova5 controller on 127.0.0.1 (ports 29999/30004/30005 by default).
 
@@ -190,7 +198,10 @@ def sim_dobot(
             from services.sim.bus_link import SimBusLink
 
             rate = frame_rate if frame_rate > 0 else s.vision.rate_hz
-            async with Bus(s.zenoh) as bus, SimBusLink(s, server, bus, frames=frames is not False, frame_rate=rate):
+            async with (
+                Bus(s.zenoh) as bus,
+                SimBusLink(s, server, bus, frames=frames is not False, frame_rate=rate),
+            ):
                 await asyncio.Event().wait()
 
     _run(main())

@@ -67,7 +67,9 @@ class EvalReport:
         ok = [r.cycle_time_real_s for r in self.results if r.success]
         compute = [r.compute_time_s for r in self.results]
         cycle_all = [r.cycle_time_real_s for r in self.results]
-        fails = Counter(f"{r.stage_reached}: {r.error_code or 'ground truth'}" for r in self.results if not r.success)
+        fails = Counter(
+            f"{r.stage_reached}: {r.error_code or 'ground truth'}" for r in self.results if not r.success
+        )
         return {
             "task": self.task,
             "trials": len(self.results),
@@ -76,7 +78,9 @@ class EvalReport:
             "cycle_time_median_s": statistics.median(ok) if ok else None,
             "cycle_time_p95_s": _p95(ok),
             "compute_time_median_s": statistics.median(compute) if compute else None,
-            "compute_share_of_cycle": (sum(compute) / sum(cycle_all)) if cycle_all and sum(cycle_all) else None,
+            "compute_share_of_cycle": (sum(compute) / sum(cycle_all))
+            if cycle_all and sum(cycle_all)
+            else None,
             "stage_median_real_s": self.stage_medians(),
             "failures": dict(fails.most_common()),
             "wall_time_s": self.wall_time_s,
@@ -100,18 +104,27 @@ def _p95(xs: list[float]) -> float | None:
     return s[min(len(s) - 1, round(0.95 * (len(s) - 1)))]
 
 
-async def run_eval(settings: Settings, trials: int, seed: int, task: str = "stand-rod",
-                   calibration_error: tuple[float, float] | None = None,
-                   console: Console | None = None, progress: bool = True) -> EvalReport:
+async def run_eval(
+    settings: Settings,
+    trials: int,
+    seed: int,
+    task: str = "stand-rod",
+    calibration_error: tuple[float, float] | None = None,
+    console: Console | None = None,
+    progress: bool = True,
+) -> EvalReport:
     from services.sim.twin import ground_truth as gt
 
     report = EvalReport(task=task, trials=trials, seed=seed)
-    s = settings.model_copy(update={"task": settings.task.model_copy(update={"reset_scene_each_cycle": False,
-                                                                          "task": task})})
+    s = settings.model_copy(
+        update={"task": settings.task.model_copy(update={"reset_scene_each_cycle": False, "task": task})}
+    )
     t_start = time.perf_counter()
     speed = s.sim.speed
     calibrated = calibration_error is not None
-    async with Cell(s, seed=seed, perfect_calibration=calibrated, calibration_error=calibration_error) as cell:
+    async with Cell(
+        s, seed=seed, perfect_calibration=calibrated, calibration_error=calibration_error
+    ) as cell:
         runner = cell.task.runner  # type: ignore[union-attr]
         tilt_at_release: list[float] = []
 
@@ -121,9 +134,15 @@ async def run_eval(settings: Settings, trials: int, seed: int, task: str = "stan
             runner._on_state(state, _msg)
 
         runner.orchestrator._on_state = on_state
-        bar = Progress(TextColumn("[bold]eval[/bold] {task.description}"), BarColumn(), MofNCompleteColumn(),
-                       TextColumn("{task.fields[rate]}"), TimeRemainingColumn(), console=console or Console(),
-                       disable=not progress)
+        bar = Progress(
+            TextColumn("[bold]eval[/bold] {task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TextColumn("{task.fields[rate]}"),
+            TimeRemainingColumn(),
+            console=console or Console(),
+            disable=not progress,
+        )
         with bar:
             job = bar.add_task(task, total=trials, rate="")
             for i in range(trials):
@@ -137,8 +156,11 @@ async def run_eval(settings: Settings, trials: int, seed: int, task: str = "stan
                     ok, reasons, tilt_after = check.success, list(check.reasons), check.tilt_deg
                 else:
                     color = outcome.object_class.removeprefix("cube_")
-                    cube = gt.check_cube_in_zone(cell.engine, color) if outcome.object_class.startswith("cube_") \
+                    cube = (
+                        gt.check_cube_in_zone(cell.engine, color)
+                        if outcome.object_class.startswith("cube_")
                         else None
+                    )
                     ok = bool(cube and cube.success)
                     reasons = list(cube.reasons) if cube else ["no cube was picked"]
                     tilt_after = None
@@ -147,7 +169,10 @@ async def run_eval(settings: Settings, trials: int, seed: int, task: str = "stan
                 # compute runs at wall speed; everything else waits on the sim clock
                 stages_real = {k: round(v if k in COMPUTE_STAGES else v * speed, 4) for k, v in d.items()}
                 res = TrialResult(
-                    seed=seed + i, success=ok, task_success=outcome.success, stage_reached=outcome.stage_reached,
+                    seed=seed + i,
+                    success=ok,
+                    task_success=outcome.success,
+                    stage_reached=outcome.stage_reached,
                     failure_reason=outcome.failure_reason or ("; ".join(reasons) if not ok else ""),
                     error_code=outcome.error_code if not outcome.success else ("" if ok else "GroundTruth"),
                     cycle_time_s=outcome.cycle_time_s,
@@ -155,7 +180,9 @@ async def run_eval(settings: Settings, trials: int, seed: int, task: str = "stan
                     compute_time_s=compute,
                     attempts=outcome.attempts,
                     tilt_before_release_deg=tilt_at_release[-1] if tilt_at_release else None,
-                    tilt_after_deg=tilt_after, settle_s=settled_s, ground_truth_reasons=reasons,
+                    tilt_after_deg=tilt_after,
+                    settle_s=settled_s,
+                    ground_truth_reasons=reasons,
                     stage_durations_real_s=stages_real,
                 )
                 report.results.append(res)
@@ -193,24 +220,29 @@ def print_report(report: EvalReport, console: Console) -> None:
     t = Table(title=f"pickplace eval — {report.task}, {s['trials']} trials from seed {report.seed}")
     t.add_column("metric")
     t.add_column("value", justify="right")
-    t.add_row("success rate (ground truth)", f"{100 * report.success_rate:.1f} % ({report.successes}/{s['trials']})")
-    for key, label in (("cycle_time_median_s", "cycle time median (real-time cell)"),
-                       ("cycle_time_p95_s", "cycle time p95 (real-time cell)"),
-                       ("compute_time_median_s", "compute (detect + plan) median")):
+    t.add_row(
+        "success rate (ground truth)", f"{100 * report.success_rate:.1f} % ({report.successes}/{s['trials']})"
+    )
+    for key, label in (
+        ("cycle_time_median_s", "cycle time median (real-time cell)"),
+        ("cycle_time_p95_s", "cycle time p95 (real-time cell)"),
+        ("compute_time_median_s", "compute (detect + plan) median"),
+    ):
         v = s[key]
         t.add_row(label, "-" if v is None else f"{v:.2f} s")
     share = s["compute_share_of_cycle"]
     t.add_row("compute share of cycle", "-" if share is None else f"{100 * share:.0f} %")
     tilts = [r.tilt_before_release_deg for r in report.results if r.tilt_before_release_deg is not None]
     if tilts:
-        t.add_row("tilt before release (median / max)", f"{statistics.median(tilts):.2f}° / {max(tilts):.2f}°")
+        t.add_row(
+            "tilt before release (median / max)", f"{statistics.median(tilts):.2f}° / {max(tilts):.2f}°"
+        )
     slow = sum(r.settle_s > SETTLE_S for r in report.results)
     if slow:
         t.add_row(f"judged after more than {SETTLE_S:.0f} s settling", str(slow))
     stages = s["stage_median_real_s"]
     if stages:
-        t.add_row("median per state (real-time cell)",
-                  " ".join(f"{k} {v:.2f}" for k, v in stages.items()))  # type: ignore[union-attr]
+        t.add_row("median per state (real-time cell)", " ".join(f"{k} {v:.2f}" for k, v in stages.items()))  # type: ignore[union-attr]
     t.add_row("wall time", f"{report.wall_time_s:.0f} s")
     for reason, n in s["failures"].items():  # type: ignore[union-attr]
         t.add_row(f"failed at {reason}", str(n))

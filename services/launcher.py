@@ -47,17 +47,30 @@ GRPC_SERVICES = ("robot", "motion", "grasp", "vision", "task")
 MULTIPROC_ENV = "PROMETHEUS_MULTIPROC_DIR"
 
 # Environment names only containers need: binding every interface, reaching peers by service name.
-CONTAINER_ONLY_ENV = frozenset({
-    "PICKPLACE_GRPC__HOST", "PICKPLACE_ZENOH__ALLOW_REMOTE", "PICKPLACE_GATEWAY__HOST",
-    "PICKPLACE_GATEWAY__ALLOW_REMOTE", "PICKPLACE_METRICS__HOST", "PICKPLACE_METRICS__ALLOW_REMOTE",
-    "PICKPLACE_METRICS__PORT", "MUJOCO_GL",
-    *(f"PICKPLACE_GRPC__{s.upper()}_HOST" for s in GRPC_SERVICES),
-})
+CONTAINER_ONLY_ENV = frozenset(
+    {
+        "PICKPLACE_GRPC__HOST",
+        "PICKPLACE_ZENOH__ALLOW_REMOTE",
+        "PICKPLACE_GATEWAY__HOST",
+        "PICKPLACE_GATEWAY__ALLOW_REMOTE",
+        "PICKPLACE_METRICS__HOST",
+        "PICKPLACE_METRICS__ALLOW_REMOTE",
+        "PICKPLACE_METRICS__PORT",
+        "MUJOCO_GL",
+        *(f"PICKPLACE_GRPC__{s.upper()}_HOST" for s in GRPC_SERVICES),
+    }
+)
 # Names only the local run sets: a per-process log file, a throw-away PostgreSQL schema (tests).
 LOCAL_ONLY_ENV = frozenset({"PICKPLACE_LOGGING__FILE", "PICKPLACE_DATABASE__SCHEMA_NAME"})
 
-DEFAULT_METRICS_PORTS = {"sim-dobot": 9100, "robot": 9101, "motion": 9102, "grasp": 9103, "vision": 9104,
-                         "task": 9105}
+DEFAULT_METRICS_PORTS = {
+    "sim-dobot": 9100,
+    "robot": 9101,
+    "motion": 9102,
+    "grasp": 9103,
+    "vision": 9104,
+    "task": 9105,
+}
 DEFAULT_ZENOH_PORT = 7447
 
 
@@ -99,14 +112,25 @@ class LocalPorts:
         ports = free_loopback_ports(12 + len(DEFAULT_METRICS_PORTS))
         it = iter(ports)
         return cls(
-            zenoh=next(it), grpc={name: next(it) for name in GRPC_SERVICES}, gateway=next(it), edge=next(it),
-            sim_dashboard=next(it), sim_feedback=next(it), sim_slow=next(it),
+            zenoh=next(it),
+            grpc={name: next(it) for name in GRPC_SERVICES},
+            gateway=next(it),
+            edge=next(it),
+            sim_dashboard=next(it),
+            sim_feedback=next(it),
+            sim_slow=next(it),
             metrics={name: next(it) for name in DEFAULT_METRICS_PORTS},
         )
 
     def all(self) -> dict[str, int]:
-        out = {"zenoh": self.zenoh, "gateway": self.gateway, "gateway-edge": self.edge,
-               "sim-dashboard": self.sim_dashboard, "sim-feedback": self.sim_feedback, "sim-slow": self.sim_slow}
+        out = {
+            "zenoh": self.zenoh,
+            "gateway": self.gateway,
+            "gateway-edge": self.edge,
+            "sim-dashboard": self.sim_dashboard,
+            "sim-feedback": self.sim_feedback,
+            "sim-slow": self.sim_slow,
+        }
         out.update({f"grpc-{k}": v for k, v in self.grpc.items()})
         out.update({f"metrics-{k}": v for k, v in self.metrics.items()})
         return out
@@ -118,8 +142,6 @@ class LocalPorts:
             if port in seen:
                 raise ConfigurationError(f"port {port} is given to both {seen[port]} and {name}")
             seen[port] = name
-
-
 
 
 @dataclass(frozen=True)
@@ -186,7 +208,8 @@ def topology(
             "PICKPLACE_GATEWAY__PORT": str(ports.gateway),
             "PICKPLACE_GATEWAY__EDGE_GRPC_PORT": str(ports.edge),
             # picks held while the database is down survive a gateway restart here
-            "PICKPLACE_GATEWAY__PICK_SPILL_FILE": str(state_dir / "pick_spill.jsonl") if state_dir
+            "PICKPLACE_GATEWAY__PICK_SPILL_FILE": str(state_dir / "pick_spill.jsonl")
+            if state_dir
             else str(settings.gateway.pick_spill_file),
         },
     }
@@ -218,7 +241,9 @@ async def check_health(settings: Settings, service: str, timeout_s: float = 3.0)
         try:
             _r, w = await asyncio.wait_for(asyncio.open_connection(host, port), timeout_s)
         except (OSError, TimeoutError) as exc:
-            raise RobotCommunicationError(f"simulated Dobot dashboard {host}:{port} not reachable: {exc}") from exc
+            raise RobotCommunicationError(
+                f"simulated Dobot dashboard {host}:{port} not reachable: {exc}"
+            ) from exc
         w.close()
         with contextlib.suppress(OSError):
             await w.wait_closed()
@@ -232,7 +257,9 @@ async def check_health(settings: Settings, service: str, timeout_s: float = 3.0)
             try:
                 await asyncio.wait_for(ch.channel_ready(), timeout_s)
             except TimeoutError as exc:
-                raise RobotCommunicationError(f"{service} gRPC {host}:{port} not ready within {timeout_s} s") from exc
+                raise RobotCommunicationError(
+                    f"{service} gRPC {host}:{port} not ready within {timeout_s} s"
+                ) from exc
         return f"{service} gRPC {host}:{port} ready"
     if service == "gateway":
         url = f"http://{_dial_host(settings.gateway.host)}:{settings.gateway.port}/api/v1/system/status"
@@ -263,7 +290,9 @@ def start_metrics_exporter(settings: Settings) -> Any:
         return None
     path = os.environ.get(MULTIPROC_ENV)
     if not path:
-        raise ConfigurationError(f"metrics.port {settings.metrics.port} needs {MULTIPROC_ENV} set to a directory")
+        raise ConfigurationError(
+            f"metrics.port {settings.metrics.port} needs {MULTIPROC_ENV} set to a directory"
+        )
     Path(path).mkdir(parents=True, exist_ok=True)
     return serve_metrics_dir(Path(path), settings.metrics.host, settings.metrics.port)
 
@@ -374,13 +403,16 @@ class Launcher:
                 await self._spawn(self.children[n])
             await asyncio.gather(*(self.wait_healthy(n) for n in names))
         for child in self.children.values():
-            self._watchers.append(asyncio.create_task(self._watch(child), name=f"launcher.watch.{child.spec.name}"))
+            self._watchers.append(
+                asyncio.create_task(self._watch(child), name=f"launcher.watch.{child.spec.name}")
+            )
 
     def _open_router(self) -> Any:
         from services.common.bus import open_session
 
-        zs = self.settings.zenoh.model_copy(update={"mode": "router", "connect": [],
-                                                    "listen": [f"tcp/127.0.0.1:{self.ports.zenoh}"]})
+        zs = self.settings.zenoh.model_copy(
+            update={"mode": "router", "connect": [], "listen": [f"tcp/127.0.0.1:{self.ports.zenoh}"]}
+        )
         return open_session(zs)
 
     async def stop(self) -> None:
@@ -432,23 +464,35 @@ class Launcher:
         env.update(spec_env)
         return env
 
-    async def run_once(self, name: str, args: Sequence[str], env: dict[str, str], timeout_s: float = 120.0) -> None:
+    async def run_once(
+        self, name: str, args: Sequence[str], env: dict[str, str], timeout_s: float = 120.0
+    ) -> None:
         """A one-shot command (the database migration) with a service's environment; raise if it fails."""
         out = self.log_dir / f"{name}.log"
         with out.open("ab") as fh:
             proc = await asyncio.create_subprocess_exec(
-                *pickplace_program(), *args, env=self._child_env(env), cwd=REPO_ROOT,
-                stdin=asyncio.subprocess.DEVNULL, stdout=fh, stderr=asyncio.subprocess.STDOUT,
-                start_new_session=True)
+                *pickplace_program(),
+                *args,
+                env=self._child_env(env),
+                cwd=REPO_ROOT,
+                stdin=asyncio.subprocess.DEVNULL,
+                stdout=fh,
+                stderr=asyncio.subprocess.STDOUT,
+                start_new_session=True,
+            )
             try:
                 code = await asyncio.wait_for(proc.wait(), timeout_s)
             except TimeoutError:
                 proc.kill()
                 await proc.wait()
-                raise ConfigurationError(f"`pickplace {' '.join(args)}` did not finish in {timeout_s} s") from None
+                raise ConfigurationError(
+                    f"`pickplace {' '.join(args)}` did not finish in {timeout_s} s"
+                ) from None
         if code != 0:
             tail = out.read_text(errors="replace").strip().splitlines()[-3:]
-            raise ConfigurationError(f"`pickplace {' '.join(args)}` failed with exit code {code}: {' | '.join(tail)}")
+            raise ConfigurationError(
+                f"`pickplace {' '.join(args)}` failed with exit code {code}: {' | '.join(tail)}"
+            )
 
     async def _spawn(self, child: Child) -> None:
         spec = child.spec
@@ -458,9 +502,15 @@ class Launcher:
             # No preexec_fn: Python code between fork and exec in this threaded process (gRPC, Zenoh)
             # crashed a child with SIGSEGV; the C fork/exec path runs none.
             child.proc = await asyncio.create_subprocess_exec(
-                *pickplace_program(), *spec.args, env=self._child_env(spec.env), cwd=REPO_ROOT,
-                stdin=asyncio.subprocess.DEVNULL, stdout=fh, stderr=asyncio.subprocess.STDOUT,
-                start_new_session=True)
+                *pickplace_program(),
+                *spec.args,
+                env=self._child_env(spec.env),
+                cwd=REPO_ROOT,
+                stdin=asyncio.subprocess.DEVNULL,
+                stdout=fh,
+                stderr=asyncio.subprocess.STDOUT,
+                start_new_session=True,
+            )
         child.started_at = time.monotonic()
         self._event(spec.name, "started", f"pid {child.proc.pid}: pickplace {' '.join(spec.args)}")
 
@@ -472,7 +522,8 @@ class Launcher:
             if not child.alive:
                 raise RobotCommunicationError(
                     f"{name} exited with code {child.proc.returncode if child.proc else None} while starting; "
-                    f"see {self.log_dir / (name + '.out')}")
+                    f"see {self.log_dir / (name + '.out')}"
+                )
             try:
                 detail = await check_health(self.settings, name, timeout_s=2.0)
             except RobotCommunicationError as exc:
@@ -481,7 +532,9 @@ class Launcher:
                 continue
             self._event(name, "healthy", detail)
             return
-        raise RobotCommunicationError(f"{name} not healthy within {timeout_s or self.health_timeout_s} s: {last}")
+        raise RobotCommunicationError(
+            f"{name} not healthy within {timeout_s or self.health_timeout_s} s: {last}"
+        )
 
     async def _watch(self, child: Child) -> None:
         """Report a child that exits on its own and start it again (with a growing pause)."""
@@ -514,17 +567,25 @@ class Launcher:
             if self.children[name].restarts >= restarts and len(healthy_after) > restarts:
                 return
             await asyncio.sleep(0.2)
-        raise RobotCommunicationError(f"{name} was not restarted {restarts} time(s) and healthy within {timeout_s} s")
+        raise RobotCommunicationError(
+            f"{name} was not restarted {restarts} time(s) and healthy within {timeout_s} s"
+        )
 
 
 def child_view(settings: Settings, ports: LocalPorts) -> Settings:
     """The settings as the children see them (their ports), for health checks and clients in this process."""
     grpc = settings.grpc.model_copy(update={f"{n}_port": p for n, p in ports.grpc.items()})
-    sim = settings.sim.model_copy(update={"dashboard_port": ports.sim_dashboard, "feedback_port": ports.sim_feedback,
-                                          "slow_feedback_port": ports.sim_slow})
+    sim = settings.sim.model_copy(
+        update={
+            "dashboard_port": ports.sim_dashboard,
+            "feedback_port": ports.sim_feedback,
+            "slow_feedback_port": ports.sim_slow,
+        }
+    )
     gw = settings.gateway.model_copy(update={"port": ports.gateway, "edge_grpc_port": ports.edge})
-    zenoh = settings.zenoh.model_copy(update={"mode": "client", "listen": [],
-                                              "connect": [f"tcp/127.0.0.1:{ports.zenoh}"]})
+    zenoh = settings.zenoh.model_copy(
+        update={"mode": "client", "listen": [], "connect": [f"tcp/127.0.0.1:{ports.zenoh}"]}
+    )
     return settings.model_copy(update={"grpc": grpc, "sim": sim, "gateway": gw, "zenoh": zenoh})
 
 
@@ -565,7 +626,8 @@ async def run_single_cycle(settings: Settings, task: str = "", timeout_s: float 
     async with channel(settings.grpc.client_host("task"), settings.grpc.task_port) as ch:
         with rpc_errors():
             return await task_pb2_grpc.TaskControllerStub(ch).RunSingleCycle(
-                task_pb2.SingleCycleRequest(task=task), timeout=timeout_s)
+                task_pb2.SingleCycleRequest(task=task), timeout=timeout_s
+            )
 
 
 async def drive_cycles(
@@ -626,22 +688,37 @@ async def run_processes(
     ports = ports or LocalPorts.from_settings(settings)
     token = settings.gateway.api_token.get_secret_value() if settings.gateway.api_token else generate_token()
     var = REPO_ROOT / "var"
-    specs = topology(settings, ports, api_token=token, metrics_root=var / "metrics",
-                     log_dir=var / "log" / "processes", state_dir=var / "gateway")
+    specs = topology(
+        settings,
+        ports,
+        api_token=token,
+        metrics_root=var / "metrics",
+        log_dir=var / "log" / "processes",
+        state_dir=var / "gateway",
+    )
 
     def show(ev: LauncherEvent) -> None:
-        colour = {"healthy": "green", "exited": "red", "restarting": "yellow", "gave-up": "red"}.get(ev.kind, "cyan")
+        colour = {"healthy": "green", "exited": "red", "restarting": "yellow", "gave-up": "red"}.get(
+            ev.kind, "cyan"
+        )
         console.print(f"[{colour}]{ev.service:9s} {ev.kind}[/{colour}] {ev.detail}")
 
     def on_pick(ev: Any) -> None:
-        what = "[green]success[/green]" if ev.success else f"[red]failed[/red] at {ev.stage_reached}: {ev.failure_reason[:80]}"
+        what = (
+            "[green]success[/green]"
+            if ev.success
+            else f"[red]failed[/red] at {ev.stage_reached}: {ev.failure_reason[:80]}"
+        )
         console.print(f"pick {ev.pick_id[:8]} {ev.object_class or '-'}: {what} in {ev.cycle_time_s:.1f} s")
 
-    async with Launcher(settings, specs, ports, log_dir=var / "log" / "processes", metrics_root=var / "metrics",
-                        on_event=show) as launcher:
-        console.print(f"[bold]pickplace[/bold] cell [cyan]{settings.cell_id}[/cyan] as {len(specs)} processes; "
-                      f"dashboard http://127.0.0.1:{ports.gateway}/#token={token}; logs in {launcher.log_dir}; "
-                      "Ctrl-C stops them all")
+    async with Launcher(
+        settings, specs, ports, log_dir=var / "log" / "processes", metrics_root=var / "metrics", on_event=show
+    ) as launcher:
+        console.print(
+            f"[bold]pickplace[/bold] cell [cyan]{settings.cell_id}[/cyan] as {len(specs)} processes; "
+            f"dashboard http://127.0.0.1:{ports.gateway}/#token={token}; logs in {launcher.log_dir}; "
+            "Ctrl-C stops them all"
+        )
         if not drive:
             await asyncio.Event().wait()
         return await drive_cycles(launcher.settings, cycles, on_pick)
@@ -649,8 +726,11 @@ async def run_processes(
 
 
 # ---------------------------------------------------------------------------- `python -m services.launcher`
-app = typer.Typer(help="pickplace process launcher: health probes, cycle driver, local topology",
-                  no_args_is_help=True, pretty_exceptions_enable=False)
+app = typer.Typer(
+    help="pickplace process launcher: health probes, cycle driver, local topology",
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+)
 
 
 def _load(profile: str | None) -> Settings:

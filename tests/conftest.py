@@ -31,8 +31,12 @@ def settings(tmp_path) -> Settings:  # type: ignore[no-untyped-def]
             "logging": {"file": str(tmp_path / "pickplace.log")},
             "zenoh": {"listen": [f"tcp/127.0.0.1:{zport}"]},
             "grpc": {"robot_port": 0},
-            "robot": {"retry_wait_s": 0.05, "request_timeout_s": 1.0, "motion_timeout_s": 20.0,
-                      "reconnect": {"max_attempts": 3, "base_delay_s": 0.05, "max_delay_s": 0.2}},
+            "robot": {
+                "retry_wait_s": 0.05,
+                "request_timeout_s": 1.0,
+                "motion_timeout_s": 20.0,
+                "reconnect": {"max_attempts": 3, "base_delay_s": 0.05, "max_delay_s": 0.2},
+            },
             "gripper": {"actuation_time_s": 0.05},
         },
     )
@@ -51,7 +55,10 @@ async def sim_server(settings: Settings) -> AsyncIterator:  # type: ignore[type-
 def robot_settings(settings: Settings, sim_server) -> Settings:  # type: ignore[no-untyped-def]
     """Settings whose robot points at the running sim."""
     r = settings.robot.model_copy(
-        update={"dashboard_port": sim_server.ports["dashboard"], "feedback_port": sim_server.ports["feedback"]}
+        update={
+            "dashboard_port": sim_server.ports["dashboard"],
+            "feedback_port": sim_server.ports["feedback"],
+        }
     )
     return settings.model_copy(update={"robot": r})
 

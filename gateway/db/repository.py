@@ -91,7 +91,11 @@ class PickRepository:
         return list((await self.session.scalars(stmt)).all())
 
     async def page_rows(
-        self, columns: Sequence[str], limit: int, offset: int, success: bool | None = None,
+        self,
+        columns: Sequence[str],
+        limit: int,
+        offset: int,
+        success: bool | None = None,
         robot_id: str | None = None,
     ) -> list[dict[str, Any]]:
         """Newest first, only ``columns``, as plain dicts (the history list: no ORM objects, no JSON columns)."""
@@ -166,7 +170,9 @@ class HealthRepository:
         self.session.add(SystemHealth(robot_id=robot_id, timestamp=at, **sample))
 
     async def latest(self) -> SystemHealth | None:
-        return await self.session.scalar(select(SystemHealth).order_by(SystemHealth.timestamp.desc()).limit(1))
+        return await self.session.scalar(
+            select(SystemHealth).order_by(SystemHealth.timestamp.desc()).limit(1)
+        )
 
     async def prune(self, older_than: timedelta, now: datetime) -> None:
         await self.session.execute(delete(SystemHealth).where(SystemHealth.timestamp < now - older_than))

@@ -28,7 +28,9 @@ async def get_config(cell: CellDep) -> dict[str, Any]:
 
 
 @router.put("", response_model=ConfigUpdateResult, dependencies=Authorized)
-async def put_config(cell: CellDep, patch: Any = Body(..., examples=[{"robot": {"speed_ratio": 30}}])) -> ConfigUpdateResult:
+async def put_config(
+    cell: CellDep, patch: Any = Body(..., examples=[{"robot": {"speed_ratio": 30}}])
+) -> ConfigUpdateResult:
     """Apply a partial settings document. 422 names every refused field; nothing changes then."""
     new, changed = apply_patch(cell.settings, patch)
     cell.settings = new
@@ -38,6 +40,9 @@ async def put_config(cell: CellDep, patch: Any = Body(..., examples=[{"robot": {
     if "gateway.joint_state_rate_hz" in changed:
         cell.hub.set_joint_rate(new.gateway.joint_state_rate_hz)
     cell.hub.on_event("config", {"updated": changed})
-    return ConfigUpdateResult(success=True, updated=changed,
-                              applied_now=[c for c in changed if when_applied(c) == "now"],
-                              applied_next_cycle=[c for c in changed if when_applied(c) == "next_cycle"])
+    return ConfigUpdateResult(
+        success=True,
+        updated=changed,
+        applied_now=[c for c in changed if when_applied(c) == "now"],
+        applied_next_cycle=[c for c in changed if when_applied(c) == "next_cycle"],
+    )

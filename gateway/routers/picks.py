@@ -20,7 +20,9 @@ async def list_picks(
     response: Response,
     limit: Annotated[int, Query(ge=1, le=1000, description="page size")] = 100,
     offset: Annotated[int, Query(ge=0, le=10_000_000)] = 0,
-    success: Annotated[bool | None, Query(description="only successful (true) or failed (false) picks")] = None,
+    success: Annotated[
+        bool | None, Query(description="only successful (true) or failed (false) picks")
+    ] = None,
     robot_id: Annotated[str | None, Query(max_length=50)] = None,
 ) -> list[PickRecord]:
     """Newest first. The total number of matching picks is in the ``X-Total-Count`` header."""
@@ -31,7 +33,9 @@ async def list_picks(
 
 
 @router.get("/{pick_id}", response_model=PickDetail)
-async def get_pick(repo: PicksDep, pick_id: Annotated[int, Path(ge=1, description="the pick's row id")]) -> PickDetail:
+async def get_pick(
+    repo: PicksDep, pick_id: Annotated[int, Path(ge=1, description="the pick's row id")]
+) -> PickDetail:
     row = await repo.get(pick_id)
     if row is None:
         raise HTTPException(404, f"pick {pick_id} not found")

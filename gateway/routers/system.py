@@ -59,6 +59,7 @@ async def get_status(cell: CellDep) -> SystemStatus:
     state = _state(robot, task)
     picks_today, success_rate, db_state = 0, None, "ok"
     try:
+
         async def today() -> tuple[int, int]:
             async with cell.sessions() as s:
                 return await PickRepository(s).today(datetime.now(UTC))
@@ -102,7 +103,9 @@ async def stop(cell: CellDep) -> CommandResult:
 async def estop(cell: CellDep) -> EstopResult:
     """Emergency stop: straight to the robot driver on its own channel; the task service is told too."""
     t0 = time.perf_counter()
-    r = await cell.clients.emergency_stop(on_task_result=lambda text: cell.hub.on_event("estop_task", {"message": text}))
+    r = await cell.clients.emergency_stop(
+        on_task_result=lambda text: cell.hub.on_event("estop_task", {"message": text})
+    )
     latency_ms = (time.perf_counter() - t0) * 1e3
     cell.metrics.estop.labels(cell.robot_id, "rest").inc()
     cell.hub.on_event("estop", {"message": r.message, "latency_ms": round(latency_ms, 3)})

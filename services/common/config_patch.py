@@ -38,12 +38,14 @@ UPDATABLE: tuple[str, ...] = (
 # When each change takes effect: at once (the gateway itself; the robot driver, motion and vision
 # services on receiving the update), or at the next cycle / scene (the key-pose demo cycle, the
 # twin's scene). Nothing waits for a restart; nothing survives one either (put it in a config file).
-NEXT_CYCLE: frozenset[str] = frozenset({
-    "sim.twin.scene.drop_zones_m",
-    "sim.twin.scene.rod_place_m",
-    "cycle.move_duration_s",
-    "cycle.dwell_s",
-})
+NEXT_CYCLE: frozenset[str] = frozenset(
+    {
+        "sim.twin.scene.drop_zones_m",
+        "sim.twin.scene.rod_place_m",
+        "cycle.move_duration_s",
+        "cycle.dwell_s",
+    }
+)
 
 
 def _under(path: str, roots: frozenset[str] | tuple[str, ...]) -> bool:
@@ -52,7 +54,7 @@ def _under(path: str, roots: frozenset[str] | tuple[str, ...]) -> bool:
 
 
 def when_applied(path: str) -> str:
-    """"now" or "next_cycle" for an updatable leaf path."""
+    """ "now" or "next_cycle" for an updatable leaf path."""
     return "next_cycle" if _under(path, NEXT_CYCLE) else "now"
 
 
@@ -92,8 +94,10 @@ def apply_patch(current: Settings, patch: Any) -> tuple[Settings, list[str]]:
     refused = [p for p in paths if not is_updatable(p)]
     if refused:
         raise ConfigRejected(
-            [{"field": p, "message": f"cannot be changed at runtime (changeable: {', '.join(UPDATABLE)})"}
-             for p in refused]
+            [
+                {"field": p, "message": f"cannot be changed at runtime (changeable: {', '.join(UPDATABLE)})"}
+                for p in refused
+            ]
         )
     errors: list[dict[str, str]] = []
     updates: dict[str, BaseModel] = {}
@@ -135,7 +139,9 @@ def merge_patches(earlier: dict[str, Any], later: dict[str, Any]) -> dict[str, A
     out = dict(earlier)
     for section, section_patch in later.items():
         if isinstance(section_patch, dict) and isinstance(out.get(section), dict):
-            out[section] = _replace_leaf_dicts(deep_merge(out[section], section_patch), section_patch, section)
+            out[section] = _replace_leaf_dicts(
+                deep_merge(out[section], section_patch), section_patch, section
+            )
         else:
             out[section] = section_patch
     return out

@@ -23,5 +23,12 @@ def pose_to_matrix(pose: common_pb2.Pose, name: str = "pose") -> np.ndarray:
 
 def matrix_to_pose(T: np.ndarray) -> common_pb2.Pose:
     q = matrix_to_quat_xyzw(T[:3, :3])
-    return common_pb2.Pose(x=float(T[0, 3]), y=float(T[1, 3]), z=float(T[2, 3]),
-                           qx=float(q[0]), qy=float(q[1]), qz=float(q[2]), qw=float(q[3]))
+    return common_pb2.Pose(
+        x=float(T[0, 3]),
+        y=float(T[1, 3]),
+        z=float(T[2, 3]),
+        qx=float(q[0]),
+        qy=float(q[1]),
+        qz=float(q[2]),
+        qw=float(q[3]),
+    )

@@ -45,10 +45,18 @@ class CellMetrics:
             "pick_failure", "Failed picks", ["robot_id", "object_class", "stage"], registry=r
         )
         self.cycle_time = Histogram(
-            "cycle_time_seconds", "Pick-place cycle time", ["robot_id"], buckets=CYCLE_TIME_BUCKETS_S, registry=r
+            "cycle_time_seconds",
+            "Pick-place cycle time",
+            ["robot_id"],
+            buckets=CYCLE_TIME_BUCKETS_S,
+            registry=r,
         )
         self.grasp_quality = Gauge(
-            "grasp_quality", "Quality score [0, 1] of the latest executed grasp", ["robot_id"], registry=r, **live
+            "grasp_quality",
+            "Quality score [0, 1] of the latest executed grasp",
+            ["robot_id"],
+            registry=r,
+            **live,
         )
         self.vision_latency = Histogram(
             "vision_latency_seconds",
@@ -65,18 +73,23 @@ class CellMetrics:
             registry=r,
         )
         self.joint_position = Gauge(
-            "robot_joint_position_radians", "Measured joint position", ["robot_id", "joint"], registry=r, **live
+            "robot_joint_position_radians",
+            "Measured joint position",
+            ["robot_id", "joint"],
+            registry=r,
+            **live,
         )
         self.robot_mode = Gauge(
-            "robot_mode", "Dobot RobotMode code (5 = enabled idle, 7 = running, 9 = error)", ["robot_id"],
-            registry=r, **live,
+            "robot_mode",
+            "Dobot RobotMode code (5 = enabled idle, 7 = running, 9 = error)",
+            ["robot_id"],
+            registry=r,
+            **live,
         )
         self.estop = Counter(
             "emergency_stop", "Emergency stops requested", ["robot_id", "source"], registry=r
         )
-        self.picks_persisted = Counter(
-            "picks_persisted", "Pick events written to the database", registry=r
-        )
+        self.picks_persisted = Counter("picks_persisted", "Pick events written to the database", registry=r)
         self.pick_buffer_depth = Gauge(
             "pick_buffer_depth", "Pick events waiting for the database", registry=r, **live
         )
@@ -100,7 +113,9 @@ class CellMetrics:
         if grasp_quality is not None and grasp_quality > 0:
             self.grasp_quality.labels(robot_id).set(grasp_quality)
 
-    def set_joint_positions(self, robot_id: str, names: Sequence[str], positions_rad: Sequence[float]) -> None:
+    def set_joint_positions(
+        self, robot_id: str, names: Sequence[str], positions_rad: Sequence[float]
+    ) -> None:
         for name, q in zip(names, positions_rad, strict=False):
             self.joint_position.labels(robot_id, name).set(q)
 

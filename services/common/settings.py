@@ -150,7 +150,9 @@ class TwinPhysicsSettings(Model):
     @model_validator(mode="after")
     def _cone(self) -> TwinPhysicsSettings:
         if self.cone == "pyramidal" and self.noslip_iterations == 0:
-            raise ValueError("cone 'pyramidal' lets the rod slip in the grasp; use it with noslip_iterations > 0")
+            raise ValueError(
+                "cone 'pyramidal' lets the rod slip in the grasp; use it with noslip_iterations > 0"
+            )
         return self
 
 
@@ -179,7 +181,9 @@ class TwinCameraSettings(Model):
         if sum((a - b) ** 2 for a, b in zip(self.position_m, self.look_at_m, strict=True)) < 1e-6:
             raise ValueError("camera position_m and look_at_m must differ")
         if self.max_depth_m <= self.min_depth_m:
-            raise ValueError(f"camera max_depth_m {self.max_depth_m} must exceed min_depth_m {self.min_depth_m}")
+            raise ValueError(
+                f"camera max_depth_m {self.max_depth_m} must exceed min_depth_m {self.min_depth_m}"
+            )
         return self
 
 
@@ -339,7 +343,14 @@ class KeyPoseCycleSettings(Model):
     )
     sequence: list[str] = Field(
         default_factory=lambda: [
-            "home", "pre_grasp", "grasp", "lift", "transport", "place", "retreat", "home"
+            "home",
+            "pre_grasp",
+            "grasp",
+            "lift",
+            "transport",
+            "place",
+            "retreat",
+            "home",
         ]
     )
     move_duration_s: float = Field(2.0, gt=0)
@@ -371,7 +382,9 @@ class TablePlaneSettings(Model):
 
     ransac_threshold_m: float = Field(0.008, gt=0, le=0.1)
     iterations: int = Field(128, ge=8, le=5000)
-    sample_stride: int = Field(4, ge=1, le=32, description="cloud stride for the plane fit (px at 640 px width)")
+    sample_stride: int = Field(
+        4, ge=1, le=32, description="cloud stride for the plane fit (px at 640 px width)"
+    )
     max_ransac_points: int = Field(2000, ge=100)
     min_inlier_fraction: float = Field(0.2, gt=0, le=1)
 
@@ -400,7 +413,9 @@ class ObstacleRuleSettings(Model):
     # on resolution and range, so the default measures the cluster's footprint instead.
     require: Literal["points", "extent", "either", "both"] = "extent"
     min_points: int = Field(10000, ge=1, description="pixels of a full 640-px-wide image")
-    min_extent_m: float = Field(0.09, gt=0, description="longest side of the cluster's footprint on the table")
+    min_extent_m: float = Field(
+        0.09, gt=0, description="longest side of the cluster's footprint on the table"
+    )
     margin_m: float = Field(0.01, ge=0, le=0.5, description="added on every side of the obstacle box")
 
 
@@ -423,7 +438,9 @@ class CubeDetectionSettings(Model):
     @model_validator(mode="after")
     def _range(self) -> CubeDetectionSettings:
         if self.min_depth_m >= self.max_depth_m:
-            raise ValueError(f"cube min_depth_m {self.min_depth_m} must be below max_depth_m {self.max_depth_m}")
+            raise ValueError(
+                f"cube min_depth_m {self.min_depth_m} must be below max_depth_m {self.max_depth_m}"
+            )
         return self
 
 
@@ -469,7 +486,9 @@ class CalibrationSettings(Model):
     @model_validator(mode="after")
     def _volume(self) -> CalibrationSettings:
         if any(lo >= hi for lo, hi in zip(self.volume_min, self.volume_max, strict=True)):
-            raise ValueError(f"calibration volume_min {self.volume_min} must be below volume_max {self.volume_max}")
+            raise ValueError(
+                f"calibration volume_min {self.volume_min} must be below volume_max {self.volume_max}"
+            )
         if (self.manual_translation_m is None) != (self.manual_rpy_deg is None):
             raise ValueError("give both calibration.manual_translation_m and manual_rpy_deg, or neither")
         return self
@@ -496,7 +515,9 @@ class ToolSettings(Model):
     palm_radius_m: float = Field(0.045, gt=0, le=0.3)
     palm_length_m: float = Field(0.09, ge=0, le=0.5)
     finger_box_m: tuple[float, float, float] = (0.03, 0.12, 0.04)
-    finger_clearance_m: float = Field(0.015, ge=0, le=0.1, description="jaw tips left out of collision checks")
+    finger_clearance_m: float = Field(
+        0.015, ge=0, le=0.1, description="jaw tips left out of collision checks"
+    )
 
 
 class MotionSettings(Model):
@@ -510,7 +531,9 @@ class MotionSettings(Model):
     knot_period_s: float = Field(0.01, ge=0.001, le=0.1, description="time between trajectory knots")
     cartesian_step_m: float = Field(0.005, gt=0, le=0.1)
     cartesian_step_deg: float = Field(2.0, gt=0, le=30)
-    jump_threshold_deg: float = Field(10.0, gt=0, le=180, description="largest joint change per Cartesian step")
+    jump_threshold_deg: float = Field(
+        10.0, gt=0, le=180, description="largest joint change per Cartesian step"
+    )
     min_manipulability: float = Field(1e-3, ge=0, description="IK solutions below this count as singular")
     table_z_m: float = 0.0
     padding_m: float = Field(0.01, ge=0, le=0.2, description="clearance kept from the table and boxes")
@@ -561,14 +584,18 @@ class GatewaySettings(Model):
     robot_status_period_s: float = Field(0.5, ge=0.05, le=60)
     health_period_s: float = Field(10.0, ge=0.1, le=3600)
     robot_id: str = Field("robot_01", pattern=r"^[A-Za-z0-9_\-]{1,50}$")
-    pick_buffer_size: int = Field(1000, ge=1, le=1_000_000, description="picks held in memory while the DB is down")
+    pick_buffer_size: int = Field(
+        1000, ge=1, le=1_000_000, description="picks held in memory while the DB is down"
+    )
     pick_spill_file: str = Field("var/gateway/pick_spill.jsonl", description="overflow of that buffer")
     pick_batch_size: int = Field(100, ge=1, le=10_000)
     db_retry_initial_s: float = Field(0.2, gt=0, le=60)
     db_retry_max_s: float = Field(5.0, gt=0, le=600)
     rpc_timeout_s: float = Field(3.0, gt=0, le=60, description="start/stop relay to the task service")
     estop_timeout_s: float = Field(1.0, gt=0, le=10)
-    edge_grpc_port: int | None = Field(50060, ge=0, le=65535, description="authenticated gRPC edge; None = off")
+    edge_grpc_port: int | None = Field(
+        50060, ge=0, le=65535, description="authenticated gRPC edge; None = off"
+    )
     web_dir: str = "web"
 
     @field_validator("api_token")
@@ -598,7 +625,9 @@ class GraspGripperSettings(Model):
     """
 
     pad_length_m: float = Field(0.022, gt=0, le=0.2, description="pad extent along tool x")
-    pad_height_m: float = Field(0.020, gt=0, le=0.2, description="pad extent along tool z, centred on the TCP")
+    pad_height_m: float = Field(
+        0.020, gt=0, le=0.2, description="pad extent along tool z, centred on the TCP"
+    )
     finger_thickness_m: float = Field(0.014, gt=0, le=0.1, description="pad + finger, along tool y")
     fingertip_beyond_tcp_m: float = Field(0.010, ge=0, le=0.2)
     finger_length_m: float = Field(0.08, gt=0, le=0.5, description="palm bottom to fingertip")
@@ -623,25 +652,40 @@ class RodStandSettings(Model):
     """Seed 001 §3.5 pick-and-stand; numbers from ``shared/specs/twin-physics-notes.md``."""
 
     place_xy_m: Vec2 | None = Field((0.45, 0.0), description="rod base on the table; None = where it lay")
-    grasp_offset_m: float = Field(0.0, ge=-0.2, le=0.2, description="grasp point along the rod from its centre")
-    offset_tolerance_m: float = Field(0.03, ge=0, le=0.2, description="worst grasp offset error along the rod")
-    min_lift_m: float = Field(0.15, gt=0, le=0.6, description="the notes: 0.10 strikes the table, 0.15 clears")
+    grasp_offset_m: float = Field(
+        0.0, ge=-0.2, le=0.2, description="grasp point along the rod from its centre"
+    )
+    offset_tolerance_m: float = Field(
+        0.03, ge=0, le=0.2, description="worst grasp offset error along the rod"
+    )
+    min_lift_m: float = Field(
+        0.15, gt=0, le=0.6, description="the notes: 0.10 strikes the table, 0.15 clears"
+    )
     turn_clearance_m: float = Field(0.02, ge=0, le=0.2, description="lowest rod point above the table")
-    place_approach_m: float = Field(0.04, gt=0, le=0.3, description="rod base above the table before the guard")
-    carry_raise_m: float = Field(0.08, ge=0, le=0.5, description="carry this much above PLACE_ABOVE (clear cubes)")
+    place_approach_m: float = Field(
+        0.04, gt=0, le=0.3, description="rod base above the table before the guard"
+    )
+    carry_raise_m: float = Field(
+        0.08, ge=0, le=0.5, description="carry this much above PLACE_ABOVE (clear cubes)"
+    )
     guard_overtravel_m: float = Field(0.01, ge=0, le=0.05, description="descent allowed past nominal touch")
     guard_speed_m_s: float = Field(0.025, gt=0, le=0.2)
     touch_force_drop_n: float = Field(0.6, gt=0, le=50, description="wrist force drop that means touch-down")
     retreat_m: float = Field(0.05, gt=0, le=0.3, description="back out along the approach after release")
     retract_up_m: float = Field(0.10, ge=0, le=0.5)
     retract_clear_m: float = Field(
-        0.06, ge=0, le=0.3,
+        0.06,
+        ge=0,
+        le=0.3,
         description="tool tip at least this far above the standing rod's top after the retract (the palm hangs "
-                    "below the tip)")
+        "below the tip)",
+    )
     max_axis_tilt_deg: float = Field(20.0, ge=0, le=60, description="a lying rod's axis this far from level")
     max_height_error_m: float = Field(0.03, ge=0, le=0.2, description="rod centre vs table + radius")
     heading_step_deg: float = Field(30.0, ge=5, le=180, description="tool headings tried after the turn")
-    turn_step_deg: float = Field(4.0, gt=0, le=10, description="orientation step of the turn checks (motion executes it densely)")
+    turn_step_deg: float = Field(
+        4.0, gt=0, le=10, description="orientation step of the turn checks (motion executes it densely)"
+    )
 
     @model_validator(mode="after")
     def _guard_starts_above(self) -> RodStandSettings:
@@ -664,8 +708,12 @@ class CubeSortSettings(Model):
             "black": (0.45, -0.45),
         }
     )
-    transport_height_m: float = Field(0.25, gt=0, le=1.0, description="tool tip while carrying (over obstacles)")
-    place_clearance_m: float = Field(0.005, ge=0, le=0.1, description="cube bottom above the table at release")
+    transport_height_m: float = Field(
+        0.25, gt=0, le=1.0, description="tool tip while carrying (over obstacles)"
+    )
+    place_clearance_m: float = Field(
+        0.005, ge=0, le=0.1, description="cube bottom above the table at release"
+    )
     place_approach_m: float = Field(0.05, gt=0, le=0.3)
     guard_overtravel_m: float = Field(0.005, ge=0, le=0.05)
     guard_speed_m_s: float = Field(0.03, gt=0, le=0.2)
@@ -687,9 +735,13 @@ class GraspSettings(Model):
     max_grasp_depth_m: float = Field(0.06, gt=0, le=0.3, description="TCP below the entry face")
     table_z_m: float = 0.0
     jump_threshold_deg: float = Field(10.0, gt=0, le=90, description="largest joint step on a dense path")
-    path_step_m: float = Field(0.01, gt=0, le=0.05, description="sampling of straight tool lines in the IK checks")
+    path_step_m: float = Field(
+        0.01, gt=0, le=0.05, description="sampling of straight tool lines in the IK checks"
+    )
     min_singularity_deg: float = Field(3.0, ge=0, le=45, description="|sin q5|, |sin q3| kept above this")
-    arm_table_clearance_m: float = Field(0.08, ge=0, le=0.5, description="elbow and wrist joints above the table")
+    arm_table_clearance_m: float = Field(
+        0.08, ge=0, le=0.5, description="elbow and wrist joints above the table"
+    )
     safe_home_joints_deg: dict[str, Vec6] = Field(
         default_factory=lambda: {
             "nova5": (180.0, 0.0, 90.0, 0.0, -90.0, 0.0),
@@ -706,7 +758,12 @@ class TaskSettings(Model):
     task: Literal["stand-rod", "sort-cubes"] = "stand-rod"
     detect_retries: int = Field(4, ge=0, le=20)  # waits 0.5, 1, 2, 4 s (doubling)
     detect_retry_delay_s: float = Field(0.5, ge=0, le=30)
-    grasp_alternatives: int = Field(8, ge=1, le=48, description="plans tried per cycle (rod: 7 grasp points along it, then the next wrist option)")
+    grasp_alternatives: int = Field(
+        8,
+        ge=1,
+        le=48,
+        description="plans tried per cycle (rod: 7 grasp points along it, then the next wrist option)",
+    )
     alarm_recoveries: int = Field(2, ge=0, le=10)
     regrasps: int = Field(2, ge=0, le=10)
     verify_grasp: bool = True

@@ -19,12 +19,11 @@ MOTION = {
     "linear": grasp_pb2.PickWaypoint.LINEAR,
     "hold": grasp_pb2.PickWaypoint.HOLD,
 }
-GRIPPER = {None: grasp_pb2.PickWaypoint.GRIPPER_NONE, "open": grasp_pb2.PickWaypoint.OPEN,
-           "close": grasp_pb2.PickWaypoint.CLOSE}
-
-
-
-
+GRIPPER = {
+    None: grasp_pb2.PickWaypoint.GRIPPER_NONE,
+    "open": grasp_pb2.PickWaypoint.OPEN,
+    "close": grasp_pb2.PickWaypoint.CLOSE,
+}
 
 
 def boxes_from_proto(msgs: Iterable[motion_pb2.CollisionBox]) -> list[Box]:
@@ -54,7 +53,9 @@ def grasp_to_proto(g: Grasp) -> grasp_pb2.GraspCandidate:
 def held_to_proto(h: HeldObject) -> motion_pb2.AttachedObject:
     if h.shape == "cylinder":
         return motion_pb2.AttachedObject(
-            shape=motion_pb2.AttachedObject.CYLINDER, radius=h.radius, length=h.length,
+            shape=motion_pb2.AttachedObject.CYLINDER,
+            radius=h.radius,
+            length=h.length,
             tool_to_object=matrix_to_pose(h.T_tool_object),
         )
     return motion_pb2.AttachedObject(
@@ -74,8 +75,10 @@ def waypoint_to_proto(w: Waypoint) -> grasp_pb2.PickWaypoint:
     if w.guard is not None:
         msg.guard.CopyFrom(
             grasp_pb2.Guard(
-                force_drop_n=w.guard.force_drop_n, overtravel_m=w.guard.overtravel_m,
-                speed_m_s=w.guard.speed_m_s, direction=list(w.guard.direction),
+                force_drop_n=w.guard.force_drop_n,
+                overtravel_m=w.guard.overtravel_m,
+                speed_m_s=w.guard.speed_m_s,
+                direction=list(w.guard.direction),
             )
         )
     return msg

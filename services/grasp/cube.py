@@ -86,7 +86,9 @@ def plan_pick_and_place(
     cc = cfg.cubes
     q_now = finite_vector(q_current, spec.dof, "current joints")
     if not spec.within_limits(q_now, tol=1e-6):
-        raise InvalidInputError(f"current joints {np.round(q_now, 4).tolist()} rad are outside the {spec.name} limits")
+        raise InvalidInputError(
+            f"current joints {np.round(q_now, 4).tolist()} rad are outside the {spec.name} limits"
+        )
     home = q_now if q_home is None else finite_vector(q_home, spec.dof, "safe-home joints")
     zone = drop_zone(cfg, cube.color)
     table = cfg.table_z_m
@@ -132,12 +134,23 @@ def plan_pick_and_place(
             T_low[2, 3] -= cc.guard_overtravel_m + cc.place_clearance_m
             T_up = T_place.copy()
             T_up[2, 3] += cc.retract_up_m
-            place = np.vstack([
-                pose_path(T_transport, T_above, step)[:-1], pose_path(T_above, T_low, step)[:-1],
-                pose_path(T_low, T_place, step, 1)[:-1], pose_path(T_place, T_up, step),
-            ])
-            poses = {"PRE_GRASP": T_pre, "GRASP": T_grasp, "LIFT": T_lift, "TRANSPORT": T_transport,
-                     "PLACE_ABOVE": T_above, "PLACE": T_place, "RETRACT": T_up}
+            place = np.vstack(
+                [
+                    pose_path(T_transport, T_above, step)[:-1],
+                    pose_path(T_above, T_low, step)[:-1],
+                    pose_path(T_low, T_place, step, 1)[:-1],
+                    pose_path(T_place, T_up, step),
+                ]
+            )
+            poses = {
+                "PRE_GRASP": T_pre,
+                "GRASP": T_grasp,
+                "LIFT": T_lift,
+                "TRANSPORT": T_transport,
+                "PLACE_ABOVE": T_above,
+                "PLACE": T_place,
+                "RETRACT": T_up,
+            }
             held = HeldObject("box", T_tool_cube, size=(size, size, size))
             options.append(_Option(g, poses, pick, place, held))
 
@@ -177,9 +190,13 @@ def plan_pick_and_place(
         if skipped < alternative:
             skipped += 1
             continue
-        return _assemble(spec, cube, zone, o.grasp, o.poses, q_pick, q_place, home, o.held, cost, cfg, T_flange_tool)
+        return _assemble(
+            spec, cube, zone, o.grasp, o.poses, q_pick, q_place, home, o.held, cost, cfg, T_flange_tool
+        )
     if skipped:
-        raise PlanningError(f"alternative {alternative} requested but only {skipped} feasible option(s) exist")
+        raise PlanningError(
+            f"alternative {alternative} requested but only {skipped} feasible option(s) exist"
+        )
     msg = (
         f"no feasible pick-and-place for the {cube.color} cube at ({c[0]:.3f}, {c[1]:.3f}, {c[2]:.3f}) m "
         f"to its drop zone ({zone[0]:.3f}, {zone[1]:.3f}) m; tried {len(options)} grasp/turn options — "
@@ -214,14 +231,31 @@ def _collides(
 
 
 def _assemble(
-    spec: RobotSpec, cube: CubeObservation, zone: Array, grasp: Grasp, P: dict[str, Array], q_pick: Array,
-    q_place: Array, home: Array, held: HeldObject, cost: float, cfg: GraspSettings, T_flange_tool: Array,
+    spec: RobotSpec,
+    cube: CubeObservation,
+    zone: Array,
+    grasp: Grasp,
+    P: dict[str, Array],
+    q_pick: Array,
+    q_place: Array,
+    home: Array,
+    held: HeldObject,
+    cost: float,
+    cfg: GraspSettings,
+    T_flange_tool: Array,
 ) -> PickPlan:
     cc = cfg.cubes
     step = cfg.path_step_m
     n_pre = len(pose_path(P["PRE_GRASP"], P["GRASP"], step)) - 1
     n_above = len(pose_path(P["TRANSPORT"], P["PLACE_ABOVE"], step)) - 1
-    n_low = len(pose_path(P["PLACE_ABOVE"], _lowered(P["PLACE"], cc.guard_overtravel_m + cc.place_clearance_m), step)) - 1
+    n_low = (
+        len(
+            pose_path(
+                P["PLACE_ABOVE"], _lowered(P["PLACE"], cc.guard_overtravel_m + cc.place_clearance_m), step
+            )
+        )
+        - 1
+    )
     i_place = n_above + n_low + 1
     guard = Guard(cc.touch_force_drop_n, cc.guard_overtravel_m + cc.place_clearance_m, cc.guard_speed_m_s)
     T_home = fk(spec, home) @ T_flange_tool
@@ -242,7 +276,11 @@ def _assemble(
         grasp=replace(grasp, q=q_pick[n_pre].copy()),
         held=held,
         place_position=np.array([zone[0], zone[1], cfg.table_z_m]),
-        notes={"drop_zone": cube.color, "joint_motion_rad": cost, "transport_height_m": float(P["LIFT"][2, 3])},
+        notes={
+            "drop_zone": cube.color,
+            "joint_motion_rad": cost,
+            "transport_height_m": float(P["LIFT"][2, 3]),
+        },
     )
 
 

@@ -92,7 +92,9 @@ def contact_wrenches(
     """
     p, n = _check_contacts(points, normals)
     if not (math.isfinite(torque_scale_m) and torque_scale_m > 0):
-        raise InvalidInputError(f"torque scale (characteristic length) must be positive, got {torque_scale_m}")
+        raise InvalidInputError(
+            f"torque scale (characteristic length) must be positive, got {torque_scale_m}"
+        )
     r = p - np.asarray(origin, dtype=float)
     edges = friction_cone_edges(n, model.friction_coefficient, model.cone_edges)  # (c, e, 3)
     torques = np.cross(r[:, None, :], edges)

@@ -91,5 +91,7 @@ def pose_path(T_a: Array, T_b: Array, step_m: float, n: int | None = None) -> Ar
     s = np.linspace(0.0, 1.0, n + 1)
     out = np.repeat(T_a[None], n + 1, axis=0)
     out[:, :3, 3] = T_a[:3, 3] + s[:, None] * (T_b[:3, 3] - T_a[:3, 3])
-    out[:, :3, :3] = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([T_a[:3, :3], T_b[:3, :3]])))(s).as_matrix()
+    out[:, :3, :3] = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([T_a[:3, :3], T_b[:3, :3]])))(
+        s
+    ).as_matrix()
     return out

@@ -117,7 +117,9 @@ def plan_pick_and_stand(
     g = cfg.gripper
     q_now = finite_vector(q_current, spec.dof, "current joints")
     if not spec.within_limits(q_now, tol=1e-6):
-        raise InvalidInputError(f"current joints {np.round(q_now, 4).tolist()} rad are outside the {spec.name} limits")
+        raise InvalidInputError(
+            f"current joints {np.round(q_now, 4).tolist()} rad are outside the {spec.name} limits"
+        )
     home = q_now if q_home is None else finite_vector(q_home, spec.dof, "safe-home joints")
     r, half = rod.diameter / 2, rod.length / 2
     table = cfg.table_z_m
@@ -170,7 +172,9 @@ def plan_pick_and_stand(
             if skipped < alternative:
                 skipped += 1
                 continue
-            return _assemble(spec, o, q_path, home, cost, lift, rod, cfg, T_flange_tool, stroke_m, p_xy, len(ranked))
+            return _assemble(
+                spec, o, q_path, home, cost, lift, rod, cfg, T_flange_tool, stroke_m, p_xy, len(ranked)
+            )
         if skipped:
             raise PlanningError(
                 f"alternative {alternative} requested but the rod has only {skipped} feasible wrist option(s)"
@@ -212,7 +216,13 @@ def _place_xy(place_xy: ArrayLike | None, configured: tuple[float, float] | None
 
 # --- options --------------------------------------------------------------------------------------
 def _build_options(
-    a_h: Array, center: Array, grasp_pt: Array, p_xy: Array, lift: float, rod: RodObservation, cfg: GraspSettings
+    a_h: Array,
+    center: Array,
+    grasp_pt: Array,
+    p_xy: Array,
+    lift: float,
+    rod: RodObservation,
+    cfg: GraspSettings,
 ) -> list[_Option]:
     rc, g = cfg.rod, cfg.gripper
     r, half = rod.diameter / 2, rod.length / 2
@@ -261,9 +271,16 @@ def _build_options(
                 # up until the open jaw clears the standing rod's top: the way home starts here
                 T_up[2, 3] = max(T_back[2, 3] + rc.retract_up_m, table + rod.length + rc.retract_clear_m)
                 poses = {
-                    "PRE_GRASP": T_pre, "GRASP": T_grasp, "LIFT": T_lift, "REORIENT": T_turn, "CARRY": T_carry,
-                    "PLACE_ABOVE": T_above, "PLACE": T_place, "PLACE_LOW": T_low,
-                    "RETRACT": T_back, "RETRACT_UP": T_up,
+                    "PRE_GRASP": T_pre,
+                    "GRASP": T_grasp,
+                    "LIFT": T_lift,
+                    "REORIENT": T_turn,
+                    "CARRY": T_carry,
+                    "PLACE_ABOVE": T_above,
+                    "PLACE": T_place,
+                    "PLACE_LOW": T_low,
+                    "RETRACT": T_back,
+                    "RETRACT_UP": T_up,
                 }
                 transit_len = max(transit_len, float(np.linalg.norm(T_carry[:3, 3] - T_turn[:3, 3])))
                 o = _Option(s, eps, heading, poses, held)
@@ -280,7 +297,9 @@ def _build_options(
         ("PLACE_ABOVE", "PLACE_LOW"): max(1, math.ceil((rc.place_approach_m + rc.guard_overtravel_m) / step)),
         ("PLACE_LOW", "PLACE"): 1,
         ("PLACE", "RETRACT"): max(1, math.ceil(rc.retreat_m / step)),
-        ("RETRACT", "RETRACT_UP"): max(1, math.ceil(max(rc.retract_up_m, rod.length + rc.retract_clear_m) / step)),
+        ("RETRACT", "RETRACT_UP"): max(
+            1, math.ceil(max(rc.retract_up_m, rod.length + rc.retract_clear_m) / step)
+        ),
     }
     floor_rod = table + rc.turn_clearance_m
     floor_gripper = table + g.table_clearance_m
@@ -353,7 +372,9 @@ def _no_plan_error(rod: RodObservation, center: Array, options: list[_Option]) -
 
 
 # --- result ---------------------------------------------------------------------------------------
-def _rod_grasp_quality(rod: RodObservation, cfg: GraspSettings, T_grasp: Array, T_tool_rod: Array) -> tuple[float, bool]:
+def _rod_grasp_quality(
+    rod: RodObservation, cfg: GraspSettings, T_grasp: Array, T_tool_rod: Array
+) -> tuple[float, bool]:
     """ε of the two line contacts along the rod at the grasp, in the rod frame (axis z)."""
     g, r = cfg.gripper, rod.diameter / 2
     T_rod_tool = invert_transform(T_tool_rod)
@@ -370,8 +391,18 @@ def _rod_grasp_quality(rod: RodObservation, cfg: GraspSettings, T_grasp: Array, 
 
 
 def _assemble(
-    spec: RobotSpec, o: _Option, q_path: Array, home: Array, cost: float, lift: float, rod: RodObservation,
-    cfg: GraspSettings, T_flange_tool: Array, stroke_m: float, p_xy: Array, n_feasible: int,
+    spec: RobotSpec,
+    o: _Option,
+    q_path: Array,
+    home: Array,
+    cost: float,
+    lift: float,
+    rod: RodObservation,
+    cfg: GraspSettings,
+    T_flange_tool: Array,
+    stroke_m: float,
+    p_xy: Array,
+    n_feasible: int,
 ) -> PickPlan:
     rc, g = cfg.rod, cfg.gripper
     ki, P = o.key_index, o.poses

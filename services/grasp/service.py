@@ -40,7 +40,9 @@ log = logging.getLogger("pickplace.grasp.service")
 
 REQUESTS = Counter("pickplace_grasp_requests_total", "Grasp service requests", ["rpc", "outcome"])
 PLANNING_SECONDS = Histogram(
-    "pickplace_grasp_planning_seconds", "Wall time of a grasp planning request", ["rpc"],
+    "pickplace_grasp_planning_seconds",
+    "Wall time of a grasp planning request",
+    ["rpc"],
     buckets=(0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0),
 )
 
@@ -62,7 +64,9 @@ class GraspPlannerServicer(grasp_pb2_grpc.GraspPlannerServicer):
             )
         self.home = np.radians(np.asarray(home_deg, dtype=float))
         if not self.spec.within_limits(self.home):
-            raise ConfigurationError(f"grasp.safe_home_joints_deg[{model!r}] = {home_deg} is outside the joint limits")
+            raise ConfigurationError(
+                f"grasp.safe_home_joints_deg[{model!r}] = {home_deg} is outside the joint limits"
+            )
         self.stroke_m = settings.gripper.stroke_m
 
     async def _run(self, rpc: str, fn: Callable[[], T]) -> T:
@@ -82,7 +86,12 @@ class GraspPlannerServicer(grasp_pb2_grpc.GraspPlannerServicer):
             seed = joints_or(request.current_joints, self.home, self.spec.dof, "current_joints")
             check = MotionCollisionCheck.from_settings(self.settings, boxes_from_proto(request.obstacles))
             result = compute_grasps(
-                obj, self.spec, self.T_flange_tool, seed, self.cfg, self.stroke_m,
+                obj,
+                self.spec,
+                self.T_flange_tool,
+                seed,
+                self.cfg,
+                self.stroke_m,
                 collision_check=check,
                 num_candidates=request.num_candidates or None,
                 check_reach=not request.skip_reachability,
@@ -104,8 +113,10 @@ class GraspPlannerServicer(grasp_pb2_grpc.GraspPlannerServicer):
             t0 = time.perf_counter()
             rod_cfg = self.settings.vision.rod
             rod = RodObservation.create(
-                list(request.center), list(request.axis),
-                request.length or rod_cfg.length_m, request.diameter or rod_cfg.diameter_m,
+                list(request.center),
+                list(request.axis),
+                request.length or rod_cfg.length_m,
+                request.diameter or rod_cfg.diameter_m,
             )
             q_now = joints_or(request.current_joints, self.home, self.spec.dof, "current_joints")
             check = MotionCollisionCheck.from_settings(self.settings, boxes_from_proto(request.obstacles))
@@ -116,10 +127,17 @@ class GraspPlannerServicer(grasp_pb2_grpc.GraspPlannerServicer):
                         {**cfg.rod.model_dump(), "grasp_offset_m": request.grasp_offset}
                     )
                 except ValidationError as exc:
-                    raise InvalidInputError(f"grasp_offset {request.grasp_offset} m: {exc.errors()[0]['msg']}") from exc
+                    raise InvalidInputError(
+                        f"grasp_offset {request.grasp_offset} m: {exc.errors()[0]['msg']}"
+                    ) from exc
                 cfg = cfg.model_copy(update={"rod": rod_cfg})
             plan = plan_pick_and_stand(
-                self.spec, rod, q_now, cfg, self.T_flange_tool, self.stroke_m,
+                self.spec,
+                rod,
+                q_now,
+                cfg,
+                self.T_flange_tool,
+                self.stroke_m,
                 q_home=self.home,
                 place_xy=list(request.place_xy) if len(request.place_xy) else None,
                 collision_check=check,
@@ -142,8 +160,15 @@ class GraspPlannerServicer(grasp_pb2_grpc.GraspPlannerServicer):
             q_now = joints_or(request.current_joints, self.home, self.spec.dof, "current_joints")
             check = MotionCollisionCheck.from_settings(self.settings, boxes_from_proto(request.obstacles))
             plan = plan_pick_and_place(
-                self.spec, cube, q_now, self.cfg, self.T_flange_tool, self.stroke_m,
-                q_home=self.home, collision_check=check, alternative=request.alternative,
+                self.spec,
+                cube,
+                q_now,
+                self.cfg,
+                self.T_flange_tool,
+                self.stroke_m,
+                q_home=self.home,
+                collision_check=check,
+                alternative=request.alternative,
             )
             return plan_to_proto(plan, time.perf_counter() - t0, time.time_ns())
 

@@ -68,7 +68,9 @@ class ObjectSpec:
             raise InvalidInputError(f"object shape must be one of {list(SHAPES)}, got {shape!r}")
         T = check_transform(T_base_object, "object pose")
         vals = {"width": width, "depth": depth, "height": height}
-        needed = {"box": ("width", "depth", "height"), "cylinder": ("width", "height"), "sphere": ("width",)}[shape]
+        needed = {"box": ("width", "depth", "height"), "cylinder": ("width", "height"), "sphere": ("width",)}[
+            shape
+        ]
         for name in needed:
             v = vals[name]
             if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 < v <= 2.0):
@@ -151,7 +153,10 @@ def box_candidates(size: tuple[float, float, float], cfg: GraspSettings, stroke_
             depth = min(s[j] / 2, cfg.max_grasp_depth_m)
             for sigma in (1.0, -1.0):
                 tcp_j = sigma * (s[j] / 2 - depth)
-                lo_j, hi_j = max(tcp_j - g.pad_height_m / 2, -s[j] / 2), min(tcp_j + g.pad_height_m / 2, s[j] / 2)
+                lo_j, hi_j = (
+                    max(tcp_j - g.pad_height_m / 2, -s[j] / 2),
+                    min(tcp_j + g.pad_height_m / 2, s[j] / 2),
+                )
                 for o in _samples(max(0.0, s[k] / 2 - g.pad_length_m / 2), N_ALONG):
                     lo_k, hi_k = max(o - g.pad_length_m / 2, -s[k] / 2), min(o + g.pad_length_m / 2, s[k] / 2)
                     if hi_j <= lo_j or hi_k <= lo_k:
@@ -168,13 +173,17 @@ def box_candidates(size: tuple[float, float, float], cfg: GraspSettings, stroke_
                     lp, ln = line.copy(), line.copy()
                     lp[:, i], ln[:, i] = s[i] / 2, -s[i] / 2
                     pts, nrm = _pair(lp, ln, -eye[i], eye[i])
-                    centering = float(np.clip(1 - 0.5 * abs(o) / (s[k] / 2) - 0.5 * abs(tcp_j) / (s[j] / 2), 0, 1))
+                    centering = float(
+                        np.clip(1 - 0.5 * abs(o) / (s[k] / 2) - 0.5 * abs(tcp_j) / (s[j] / 2), 0, 1)
+                    )
                     p = np.zeros(3)
                     p[j], p[k] = tcp_j, o
                     for tau in (1.0, -1.0):
                         R = tool_rotation(-sigma * eye[j], tau * eye[i])
-                        label = (f"box: close {'xyz'[i]}, from {'+' if sigma > 0 else '-'}{'xyz'[j]}, offset {o:+.3f} m, "
-                                 f"jaw {'+' if tau > 0 else '-'}")
+                        label = (
+                            f"box: close {'xyz'[i]}, from {'+' if sigma > 0 else '-'}{'xyz'[j]}, offset {o:+.3f} m, "
+                            f"jaw {'+' if tau > 0 else '-'}"
+                        )
                         out.append(Candidate(pose(R, p), float(width), pts, nrm, centering, label))
     return out
 
@@ -211,8 +220,10 @@ def cylinder_candidates(
                         p = t * ez + sigma * shift * v
                         for tau in (1.0, -1.0):
                             R = tool_rotation(-sigma * v, tau * u)
-                            label = (f"cylinder: side, {math.degrees(phi - phi0):.0f}° from top, offset {t:+.3f} m, "
-                                     f"jaw {'+' if tau > 0 else '-'}")
+                            label = (
+                                f"cylinder: side, {math.degrees(phi - phi0):.0f}° from top, offset {t:+.3f} m, "
+                                f"jaw {'+' if tau > 0 else '-'}"
+                            )
                             out.append(Candidate(pose(R, p), width, pts, nrm, float(1 - abs(t) / h2), label))
             # end approach, along the axis: the pads touch lines parallel to the axis
             depth = min(h2, cfg.max_grasp_depth_m)
@@ -415,7 +426,9 @@ def filter_reachable(
     if not grasps:
         return []
     T_tool_flange = invert_transform(T_flange_tool)
-    paths = np.stack([approach_path(gr.T_base_tool, cfg.approach_distance_m, cfg.path_step_m) for gr in grasps])
+    paths = np.stack(
+        [approach_path(gr.T_base_tool, cfg.approach_distance_m, cfg.path_step_m) for gr in grasps]
+    )
     res = track_paths(spec, paths @ T_tool_flange, seed, track_limits(cfg))
     out: list[tuple[float, Grasp]] = []
     rej = rejected if rejected is not None else {}

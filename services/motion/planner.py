@@ -388,7 +388,9 @@ class MotionPlanner:
         if method == "toppra_dense":
             # a dense Cartesian path: the spline through its close points is the line itself
             try:
-                traj = time_parameterize(path, self.line_limits, self.names, dt=c.knot_period_s, method="toppra")
+                traj = time_parameterize(
+                    path, self.line_limits, self.names, dt=c.knot_period_s, method="toppra"
+                )
             except TrajectoryLimitError as exc:
                 notes.append(f"spline timing of the tool line failed ({exc}); stopping at every step instead")
                 traj = time_parameterize(

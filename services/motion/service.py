@@ -46,15 +46,11 @@ T = TypeVar("T")
 # --- proto ↔ core ---------------------------------------------------------------------------------
 
 
-
-
 def _joints(values: object, name: str) -> Array:
     arr = np.asarray(list(values), dtype=float)  # type: ignore[call-overload]
     if arr.size == 0:
         raise InvalidInputError(f"{name} is empty")
     return arr
-
-
 
 
 def scene_from_proto(msg: motion_pb2.PlanningScene, motion: MotionSettings) -> Scene:
@@ -272,4 +268,6 @@ async def serve(settings: Settings) -> None:
     servicer = MotionPlannerServicer(settings)
     server, port = build_server(settings, servicer=servicer)
     async with Bus(settings.zenoh) as bus, LiveConfig(bus, settings, servicer.on_config):
-        await grpc_util.serve_until_terminated(server, "motion service (MotionPlanner)", settings.grpc.host, port)
+        await grpc_util.serve_until_terminated(
+            server, "motion service (MotionPlanner)", settings.grpc.host, port
+        )

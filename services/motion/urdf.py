@@ -436,6 +436,7 @@ if __name__ == "__main__":
         print(f"wrote {p}")
     sys.exit(0)
 
+
 def tool_geometry(settings: Settings) -> ToolGeometry:
     """The tool of ``settings``: TCP ``gripper.tcp_offset_m`` along the flange z, shapes from ``motion.tool``."""
     t = settings.motion.tool

@@ -356,7 +356,9 @@ class DobotClient:
         assert self._feedback is not None
         return self._feedback
 
-    async def wait_feedback(self, predicate: Callable[[FeedbackState], bool], timeout_s: float) -> FeedbackState:
+    async def wait_feedback(
+        self, predicate: Callable[[FeedbackState], bool], timeout_s: float
+    ) -> FeedbackState:
         """Wait until a packet satisfies ``predicate`` (TimeoutError after ``timeout_s``; a silent
         feedback stream is a RobotCommunicationError instead)."""
         fb = self._feedback

@@ -294,8 +294,13 @@ class RobotDriver:
         return reached
 
     # ------------------------------------------------------------------ grasp (LLD §13.2)
-    async def execute_grasp(self, T_base_tool: np.ndarray, approach_m: float = 0.10, lift_m: float = 0.10,
-                            speed_scale: float = 0.3) -> GripperState:
+    async def execute_grasp(
+        self,
+        T_base_tool: np.ndarray,
+        approach_m: float = 0.10,
+        lift_m: float = 0.10,
+        speed_scale: float = 0.3,
+    ) -> GripperState:
         """Open, move above the grasp along the tool axis, descend in a straight line, close, lift.
 
         Every segment is checked like any trajectory (joints, speed, workspace) before it is sent;
@@ -321,8 +326,9 @@ class RobotDriver:
         q_above = analytic.solve_nearest(self.spec, T_above @ np.linalg.inv(T_ft), q_now)
 
         def timed(path: np.ndarray) -> JointTrajectory:
-            return min_jerk_keypose_trajectory(path, 0.05, 0.0, joint_names=self.spec.joint_names, limits=limits,
-                                               wrap=False)
+            return min_jerk_keypose_trajectory(
+                path, 0.05, 0.0, joint_names=self.spec.joint_names, limits=limits, wrap=False
+            )
 
         # the whole motion is solved and checked before anything moves
         down = straight_line_joint_path(self.spec, T_above, T_grasp, q_above, T_flange_tool=T_ft)

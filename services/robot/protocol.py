@@ -222,19 +222,31 @@ def mov_j_pose(
 
 def _mov_l(target: str, a: int | None, v: int | None, speed: int | None, cp: int | None) -> str:
     # an absolute speed (mm/s) replaces the velocity ratio: the controller takes one or the other
-    return command("MovL", target, a=_opt_int(a), v=None if speed is not None else _opt_int(v),
-                   speed=_opt_int(speed), cp=_opt_int(cp))
+    return command(
+        "MovL",
+        target,
+        a=_opt_int(a),
+        v=None if speed is not None else _opt_int(v),
+        speed=_opt_int(speed),
+        cp=_opt_int(cp),
+    )
 
 
 def mov_l_joint(
-    q_deg: Sequence[float], a: int | None = None, v: int | None = None, speed: int | None = None,
+    q_deg: Sequence[float],
+    a: int | None = None,
+    v: int | None = None,
+    speed: int | None = None,
     cp: int | None = None,
 ) -> str:
     return _mov_l(f"joint={fmt_point(q_deg)}", a, v, speed, cp)
 
 
 def mov_l_pose(
-    pose_mm_deg: Sequence[float], a: int | None = None, v: int | None = None, speed: int | None = None,
+    pose_mm_deg: Sequence[float],
+    a: int | None = None,
+    v: int | None = None,
+    speed: int | None = None,
     cp: int | None = None,
 ) -> str:
     return _mov_l(f"pose={fmt_point(pose_mm_deg)}", a, v, speed, cp)

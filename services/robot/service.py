@@ -144,10 +144,15 @@ class RobotControllerServicer(robot_pb2_grpc.RobotControllerServicer):
 
     async def ExecuteGrasp(self, request, context):  # type: ignore[no-untyped-def]
         T = pose_to_matrix(request.grasp_pose, "grasp_pose")
-        st = await self.driver.execute_grasp(T, request.approach_distance or 0.10, request.lift_distance or 0.10,
-                                             request.speed_scale or 0.3)
-        return robot_pb2.GripperResponse(success=True, closed=st.closed, object_detected=bool(st.object_detected),
-                                         message="grasped and lifted")
+        st = await self.driver.execute_grasp(
+            T, request.approach_distance or 0.10, request.lift_distance or 0.10, request.speed_scale or 0.3
+        )
+        return robot_pb2.GripperResponse(
+            success=True,
+            closed=st.closed,
+            object_detected=bool(st.object_detected),
+            message="grasped and lifted",
+        )
 
     async def Stop(self, request, context):  # type: ignore[no-untyped-def]
         await self.driver.stop()

@@ -35,7 +35,9 @@ def build_sim_server(
     spec = get_robot(settings.robot.model)
     eng = build_engine(settings, engine)
     if q0_deg is None:
-        q0_deg = settings.sim.twin.initial_joints_deg if (engine or settings.sim.engine) == "twin" else HOME_DEG
+        q0_deg = (
+            settings.sim.twin.initial_joints_deg if (engine or settings.sim.engine) == "twin" else HOME_DEG
+        )
     q0 = np.deg2rad(q0_deg)
     controller = SimController(
         spec,

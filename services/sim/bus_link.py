@@ -67,7 +67,9 @@ def parse_seed(payload: bytes, current: int) -> int:
     try:
         seed = json.loads(payload.decode())["seed"]
     except (ValueError, KeyError, TypeError, UnicodeDecodeError) as exc:
-        raise InvalidInputError(f"scene reset payload must be JSON {{\"seed\": int}}, got {payload[:60]!r}") from exc
+        raise InvalidInputError(
+            f'scene reset payload must be JSON {{"seed": int}}, got {payload[:60]!r}'
+        ) from exc
     if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
         raise InvalidInputError(f"scene reset seed must be a non-negative integer, got {seed!r}")
     return seed
@@ -76,8 +78,14 @@ def parse_seed(payload: bytes, current: int) -> int:
 class SimBusLink:
     """Camera frames out, scene resets in, for one running :class:`SimDobotServer` with the twin engine."""
 
-    def __init__(self, settings: Settings, server: SimDobotServer, bus: Bus, frames: bool = True,
-                 frame_rate: float | None = None):
+    def __init__(
+        self,
+        settings: Settings,
+        server: SimDobotServer,
+        bus: Bus,
+        frames: bool = True,
+        frame_rate: float | None = None,
+    ):
         self.settings = settings
         self.frame_rate = frame_rate or settings.vision.rate_hz
         self.server = server
@@ -101,13 +109,24 @@ class SimBusLink:
         if self.frames:
             cam = await asyncio.to_thread(TwinCamera, self.server.controller.engine, self.seed)
             self.camera = CurrentCamera(cam)
-            self._tasks.append(asyncio.create_task(
-                publish_camera_frames(self.camera, self.bus, keys.camera_frames, self.frame_rate, self._stop),  # type: ignore[arg-type]
-                name="sim.frames"))
-        self._queryable = self.bus.session.declare_queryable(scene_reset_key(self.settings.cell_id), self._on_query)
+            self._tasks.append(
+                asyncio.create_task(
+                    publish_camera_frames(
+                        self.camera, self.bus, keys.camera_frames, self.frame_rate, self._stop
+                    ),  # type: ignore[arg-type]
+                    name="sim.frames",
+                )
+            )
+        self._queryable = self.bus.session.declare_queryable(
+            scene_reset_key(self.settings.cell_id), self._on_query
+        )
         self._live = LiveConfig(self.bus, self.settings, self._on_config).start()
-        log.info("sim on zenoh: frames %s on %s, scene reset on %s", "published" if self.frames else "off",
-                 keys.camera_frames, scene_reset_key(self.settings.cell_id))
+        log.info(
+            "sim on zenoh: frames %s on %s, scene reset on %s",
+            "published" if self.frames else "off",
+            keys.camera_frames,
+            scene_reset_key(self.settings.cell_id),
+        )
         return self
 
     async def _on_config(self, new: Settings, changed: list[str]) -> None:
@@ -132,8 +151,11 @@ class SimBusLink:
         """Zenoh thread: hand the query to the event loop (the query is answered from there)."""
         payload = query.payload.to_bytes() if query.payload is not None else b""
         with contextlib.suppress(RuntimeError):
-            self._loop.call_soon_threadsafe(lambda: self._tasks.append(
-                asyncio.create_task(self._answer(query, payload), name="sim.reset")))
+            self._loop.call_soon_threadsafe(
+                lambda: self._tasks.append(
+                    asyncio.create_task(self._answer(query, payload), name="sim.reset")
+                )
+            )
 
     async def _answer(self, query: Any, payload: bytes) -> None:
         try:
@@ -151,7 +173,9 @@ class SimBusLink:
         from services.sim.twin.camera import TwinCamera
 
         if self.settings.sim.engine != "twin":
-            raise InvalidInputError(f"scene reset needs the twin engine, this sim runs {self.settings.sim.engine!r}")
+            raise InvalidInputError(
+                f"scene reset needs the twin engine, this sim runs {self.settings.sim.engine!r}"
+            )
         async with self._reset_lock:
             s = self.settings.model_copy(update={"sim": self.settings.sim.model_copy(update={"seed": seed})})
             new = await asyncio.to_thread(create_twin_engine, s, seed)
@@ -172,8 +196,9 @@ class SimBusLink:
             return seed
 
 
-async def request_scene_reset(bus: Bus, cell_id: str, seed: int | None = None,
-                              timeout_s: float = RESET_TIMEOUT_S) -> int:
+async def request_scene_reset(
+    bus: Bus, cell_id: str, seed: int | None = None, timeout_s: float = RESET_TIMEOUT_S
+) -> int:
     """Ask the sim-dobot process for a fresh scene; returns its seed once the new scene is live."""
     payload = b"" if seed is None else json.dumps({"seed": seed}).encode()
     key = scene_reset_key(cell_id)
@@ -183,7 +208,11 @@ async def request_scene_reset(bus: Bus, cell_id: str, seed: int | None = None,
         for reply in replies:
             if reply.ok is not None:
                 return int(json.loads(reply.ok.payload.to_bytes().decode())["seed"])
-            raise RobotCommunicationError(f"scene reset on {key} refused: {reply.err.payload.to_bytes().decode()}")
-        raise RobotCommunicationError(f"no simulated cell answered a scene reset on {key} within {timeout_s} s")
+            raise RobotCommunicationError(
+                f"scene reset on {key} refused: {reply.err.payload.to_bytes().decode()}"
+            )
+        raise RobotCommunicationError(
+            f"no simulated cell answered a scene reset on {key} within {timeout_s} s"
+        )
 
     return await asyncio.to_thread(ask)

@@ -45,8 +45,15 @@ def _v(v: vision_pb2.Vec3) -> np.ndarray:
 
 def boxes_msg(obstacles: tuple[SeenBox, ...]) -> list[motion_pb2.CollisionBox]:
     return [
-        motion_pb2.CollisionBox(name=f"obstacle{i}", x_min=b.min[0], x_max=b.max[0], y_min=b.min[1],
-                                y_max=b.max[1], z_min=b.min[2], z_max=b.max[2])
+        motion_pb2.CollisionBox(
+            name=f"obstacle{i}",
+            x_min=b.min[0],
+            x_max=b.max[0],
+            y_min=b.min[1],
+            y_max=b.max[1],
+            z_min=b.min[2],
+            z_max=b.max[2],
+        )
         for i, b in enumerate(obstacles)
     ]
 
@@ -59,8 +66,12 @@ class CellClients:
         self.settings = settings
         self._channels = {
             name: channel(g.client_host(name), port)  # type: ignore[arg-type]
-            for name, port in (("vision", g.vision_port), ("grasp", g.grasp_port), ("motion", g.motion_port),
-                               ("robot", g.robot_port))
+            for name, port in (
+                ("vision", g.vision_port),
+                ("grasp", g.grasp_port),
+                ("motion", g.motion_port),
+                ("robot", g.robot_port),
+            )
         }
         self.vision = GrpcVision(vision_pb2_grpc.VisionStub(self._channels["vision"]), g.request_timeout_s)
         # planning requests may take as long as the PLAN state's deadline allows
@@ -89,7 +100,8 @@ class GrpcVision:
             raise VisionError("vision has no camera-to-base calibration; run `pickplace calibrate`")
         rods = tuple(
             SeenRod(_v(r.center_base), _v(r.axis_base), r.length_m, r.diameter_m, r.confidence)
-            for r in objs.rods if r.has_base
+            for r in objs.rods
+            if r.has_base
         )
         cubes = tuple(SeenCube(_v(c.centroid_base), c.color_label) for c in objs.cubes if c.has_base)
         boxes = tuple(SeenBox(_v(o.base.min), _v(o.base.max)) for o in objs.obstacles if o.has_base)
@@ -97,21 +109,32 @@ class GrpcVision:
 
 
 def _waypoints(plan: grasp_pb2.PickPlan) -> list[PlannedWaypoint]:
-    motion = {grasp_pb2.PickWaypoint.JOINT: "joint", grasp_pb2.PickWaypoint.MOTION_UNSPECIFIED: "joint",
-              grasp_pb2.PickWaypoint.LINEAR: "linear", grasp_pb2.PickWaypoint.HOLD: "hold"}
+    motion = {
+        grasp_pb2.PickWaypoint.JOINT: "joint",
+        grasp_pb2.PickWaypoint.MOTION_UNSPECIFIED: "joint",
+        grasp_pb2.PickWaypoint.LINEAR: "linear",
+        grasp_pb2.PickWaypoint.HOLD: "hold",
+    }
     gripper = {grasp_pb2.PickWaypoint.OPEN: "open", grasp_pb2.PickWaypoint.CLOSE: "close"}
     out = []
     for w in plan.waypoints:
         guarded = w.HasField("guard") and w.guard.force_drop_n > 0
-        out.append(PlannedWaypoint(
-            name=w.name, motion=motion[w.motion], T_base_tool=pose_to_matrix(w.pose), joints=np.array(w.joints),
-            gripper=gripper.get(w.gripper), guard_force_n=w.guard.force_drop_n if guarded else 0.0,
-            guard_overtravel_m=w.guard.overtravel_m if guarded else 0.0,
-            guard_speed_m_s=w.guard.speed_m_s if guarded else 0.0,
-            guard_direction=np.array(w.guard.direction) if guarded and len(w.guard.direction) == 3
-            else np.array([0.0, 0.0, -1.0]),
-            holding=w.holding,
-        ))
+        out.append(
+            PlannedWaypoint(
+                name=w.name,
+                motion=motion[w.motion],
+                T_base_tool=pose_to_matrix(w.pose),
+                joints=np.array(w.joints),
+                gripper=gripper.get(w.gripper),
+                guard_force_n=w.guard.force_drop_n if guarded else 0.0,
+                guard_overtravel_m=w.guard.overtravel_m if guarded else 0.0,
+                guard_speed_m_s=w.guard.speed_m_s if guarded else 0.0,
+                guard_direction=np.array(w.guard.direction)
+                if guarded and len(w.guard.direction) == 3
+                else np.array([0.0, 0.0, -1.0]),
+                holding=w.holding,
+            )
+        )
     return out
 
 
@@ -120,27 +143,50 @@ class GrpcGrasp:
         self._stub, self._timeout = stub, timeout_s
 
     def _plan(self, plan: grasp_pb2.PickPlan) -> GraspPlan:
-        return GraspPlan(plan.task, _waypoints(plan), plan.grasp.quality,
-                         plan.held_object if plan.HasField("held_object") else None,
-                         np.array(plan.place_position), plan.summary)
+        return GraspPlan(
+            plan.task,
+            _waypoints(plan),
+            plan.grasp.quality,
+            plan.held_object if plan.HasField("held_object") else None,
+            np.array(plan.place_position),
+            plan.summary,
+        )
 
-    async def plan_rod(self, rod: SeenRod, q_now: np.ndarray, obstacles: tuple[SeenBox, ...],
-                       alternative: int, place_xy: np.ndarray | None = None,
-                       grasp_offset_m: float | None = None) -> GraspPlan:
-        req = grasp_pb2.PickAndStandRequest(center=rod.center.tolist(), axis=rod.axis.tolist(), length=0.0,
-                                            diameter=0.0, current_joints=q_now.tolist(),
-                                            obstacles=boxes_msg(obstacles), alternative=alternative,
-                                            place_xy=[] if place_xy is None else list(map(float, place_xy)))
+    async def plan_rod(
+        self,
+        rod: SeenRod,
+        q_now: np.ndarray,
+        obstacles: tuple[SeenBox, ...],
+        alternative: int,
+        place_xy: np.ndarray | None = None,
+        grasp_offset_m: float | None = None,
+    ) -> GraspPlan:
+        req = grasp_pb2.PickAndStandRequest(
+            center=rod.center.tolist(),
+            axis=rod.axis.tolist(),
+            length=0.0,
+            diameter=0.0,
+            current_joints=q_now.tolist(),
+            obstacles=boxes_msg(obstacles),
+            alternative=alternative,
+            place_xy=[] if place_xy is None else list(map(float, place_xy)),
+        )
         if grasp_offset_m is not None:
             req.grasp_offset = grasp_offset_m
         with rpc_errors():
             return self._plan(await self._stub.PlanPickAndStand(req, timeout=self._timeout))
 
-    async def plan_cube(self, cube: SeenCube, q_now: np.ndarray, obstacles: tuple[SeenBox, ...],
-                        alternative: int) -> GraspPlan:
-        req = grasp_pb2.PickAndPlaceRequest(cube_pose=matrix_to_pose(make_transform(np.eye(3), cube.centroid)),
-                                            size=0.0, color=cube.color, current_joints=q_now.tolist(),
-                                            obstacles=boxes_msg(obstacles), alternative=alternative)
+    async def plan_cube(
+        self, cube: SeenCube, q_now: np.ndarray, obstacles: tuple[SeenBox, ...], alternative: int
+    ) -> GraspPlan:
+        req = grasp_pb2.PickAndPlaceRequest(
+            cube_pose=matrix_to_pose(make_transform(np.eye(3), cube.centroid)),
+            size=0.0,
+            color=cube.color,
+            current_joints=q_now.tolist(),
+            obstacles=boxes_msg(obstacles),
+            alternative=alternative,
+        )
         with rpc_errors():
             return self._plan(await self._stub.PlanPickAndPlace(req, timeout=self._timeout))
 
@@ -155,8 +201,9 @@ class GrpcMotion:
         T[2, 3] = settings.gripper.tcp_offset_m
         self._T_flange_tool = T
 
-    def _scene(self, obstacles: tuple[SeenBox, ...], held: object | None,
-               table_contact: bool = False) -> motion_pb2.PlanningScene:
+    def _scene(
+        self, obstacles: tuple[SeenBox, ...], held: object | None, table_contact: bool = False
+    ) -> motion_pb2.PlanningScene:
         scene = motion_pb2.PlanningScene(boxes=boxes_msg(obstacles))
         if held is not None:
             scene.attached.CopyFrom(held)  # type: ignore[arg-type]
@@ -167,24 +214,44 @@ class GrpcMotion:
     def _options(self, held: object | None, slow: bool = False) -> motion_pb2.MotionOptions | None:
         t = self._task
         if slow:
-            return motion_pb2.MotionOptions(velocity_scale=t.guarded_speed_scale, acceleration_scale=t.guarded_speed_scale)
+            return motion_pb2.MotionOptions(
+                velocity_scale=t.guarded_speed_scale, acceleration_scale=t.guarded_speed_scale
+            )
         if held is not None:  # carrying: gentler, so the object does not creep in the grasp
-            return motion_pb2.MotionOptions(velocity_scale=t.holding_speed_scale, acceleration_scale=t.holding_speed_scale)
+            return motion_pb2.MotionOptions(
+                velocity_scale=t.holding_speed_scale, acceleration_scale=t.holding_speed_scale
+            )
         return None
 
-    async def plan_joint(self, start: np.ndarray, goal: np.ndarray, obstacles: tuple[SeenBox, ...],
-                         held: object | None) -> JointTrajectory:
-        req = motion_pb2.PlanJointsRequest(start=start.tolist(), goal=goal.tolist(),
-                                           scene=self._scene(obstacles, held), options=self._options(held))
+    async def plan_joint(
+        self, start: np.ndarray, goal: np.ndarray, obstacles: tuple[SeenBox, ...], held: object | None
+    ) -> JointTrajectory:
+        req = motion_pb2.PlanJointsRequest(
+            start=start.tolist(),
+            goal=goal.tolist(),
+            scene=self._scene(obstacles, held),
+            options=self._options(held),
+        )
         with rpc_errors():
             resp = await self._stub.PlanJoints(req, timeout=self._timeout)
         return JointTrajectory.from_proto(resp.trajectory)
 
-    async def plan_linear(self, start: np.ndarray, T_goal: np.ndarray, obstacles: tuple[SeenBox, ...],
-                          held: object | None, slow: bool = False, table_contact: bool = False) -> JointTrajectory:
+    async def plan_linear(
+        self,
+        start: np.ndarray,
+        T_goal: np.ndarray,
+        obstacles: tuple[SeenBox, ...],
+        held: object | None,
+        slow: bool = False,
+        table_contact: bool = False,
+    ) -> JointTrajectory:
         opts = self._options(held, slow)
-        req = motion_pb2.PlanCartesianRequest(start=start.tolist(), poses=[matrix_to_pose(T_goal)],
-                                              scene=self._scene(obstacles, held, table_contact), options=opts)
+        req = motion_pb2.PlanCartesianRequest(
+            start=start.tolist(),
+            poses=[matrix_to_pose(T_goal)],
+            scene=self._scene(obstacles, held, table_contact),
+            options=opts,
+        )
         with rpc_errors():
             resp = await self._stub.PlanCartesian(req, timeout=self._timeout)
         return JointTrajectory.from_proto(resp.trajectory)
@@ -241,4 +308,3 @@ class GrpcRobot:
     async def emergency_stop(self) -> None:
         with rpc_errors():
             await self._stub.EmergencyStop(robot_pb2.EmergencyStopRequest(), timeout=self._timeout)
-

@@ -69,8 +69,15 @@ class CycleAborted(Exception):
 
 
 class Orchestrator:
-    def __init__(self, vision: VisionPort, grasp: GraspPort, motion: MotionPort, robot: RobotPort,
-                 config: CycleConfig | None = None, on_state: StateListener | None = None):
+    def __init__(
+        self,
+        vision: VisionPort,
+        grasp: GraspPort,
+        motion: MotionPort,
+        robot: RobotPort,
+        config: CycleConfig | None = None,
+        on_state: StateListener | None = None,
+    ):
         self.vision, self.grasp, self.motion, self.robot = vision, grasp, motion, robot
         self.config = config or CycleConfig()
         self._on_state = on_state
@@ -87,8 +94,13 @@ class Orchestrator:
             out.stage_durations_s[key] = out.stage_durations_s.get(key, 0.0) + (now - self._stage_t0)
         self._stage_t0 = now
         self.state = state
-        if out is not None and state not in (CycleState.ABORT, CycleState.DETECT_FAILED,
-                                             CycleState.RETRY, CycleState.ESTOP, CycleState.ERROR):
+        if out is not None and state not in (
+            CycleState.ABORT,
+            CycleState.DETECT_FAILED,
+            CycleState.RETRY,
+            CycleState.ESTOP,
+            CycleState.ERROR,
+        ):
             out.stage_reached = state.value
         log.info("state %s %s", state.value, message)
         if self._on_state is not None:
@@ -104,8 +116,9 @@ class Orchestrator:
     # ------------------------------------------------------------------ the cycle
     async def run(self, task: str = "stand-rod") -> PickOutcome:
         t0 = time.perf_counter()
-        out = PickOutcome(pick_id=uuid.uuid4().hex, task=task,
-                          object_class="rod" if task == "stand-rod" else "cube")
+        out = PickOutcome(
+            pick_id=uuid.uuid4().hex, task=task, object_class="rod" if task == "stand-rod" else "cube"
+        )
         self._outcome = out
         attempts = Attempts()
         self._enter(CycleState.INIT)
@@ -165,9 +178,13 @@ class Orchestrator:
             try:
                 obs = await self._timed(self.vision.observe(), self.config.deadlines.detect_s, "detection")
                 if out.task == "stand-rod" and not obs.rods:
-                    raise ObjectNotDetectedError("no rod detected: " + ("; ".join(obs.notes) or "empty table"))
+                    raise ObjectNotDetectedError(
+                        "no rod detected: " + ("; ".join(obs.notes) or "empty table")
+                    )
                 if out.task == "sort-cubes" and not obs.cubes:
-                    raise ObjectNotDetectedError("no cube detected: " + ("; ".join(obs.notes) or "empty table"))
+                    raise ObjectNotDetectedError(
+                        "no cube detected: " + ("; ".join(obs.notes) or "empty table")
+                    )
                 return obs
             except RobotError as exc:
                 action = decide(exc, attempts, self.config.limits)
@@ -176,18 +193,24 @@ class Orchestrator:
                 if action is not Action.RETRY_DETECT:
                     out.failure_reason = f"DETECT: {exc} (after {attempts.detect} retries)"
                     raise CycleAborted(out.failure_reason) from exc
-                self._enter(CycleState.RETRY, f"detection retry {attempts.detect}/{self.config.limits.detect}")
+                self._enter(
+                    CycleState.RETRY, f"detection retry {attempts.detect}/{self.config.limits.detect}"
+                )
                 # doubling waits: a restarting vision service or a passing occlusion gets time
                 await asyncio.sleep(self.config.detect_retry_delay_s * 2 ** (attempts.detect - 1))
 
     # ------------------------------------------------------------------ PLAN
-    async def _plan(self, task: str, obs: Observation, out: PickOutcome,
-                    attempts: Attempts) -> tuple[GraspPlan | None, list[JointTrajectory | None]]:
+    async def _plan(
+        self, task: str, obs: Observation, out: PickOutcome, attempts: Attempts
+    ) -> tuple[GraspPlan | None, list[JointTrajectory | None]]:
         while True:
             self._enter(CycleState.PLAN, f"grasp option {attempts.grasp_variants}")
             try:
-                return await self._timed(self._plan_once(task, obs, out, attempts.grasp_variants),
-                                         self.config.deadlines.plan_s, "planning")
+                return await self._timed(
+                    self._plan_once(task, obs, out, attempts.grasp_variants),
+                    self.config.deadlines.plan_s,
+                    "planning",
+                )
             except PlanningError as exc:
                 action = decide(exc, attempts, self.config.limits)
                 out.error_code = type(exc).__name__
@@ -196,30 +219,45 @@ class Orchestrator:
                     raise CycleAborted(out.failure_reason) from exc
                 log.info("plan option failed (%s); trying the next one", exc)
 
-    async def _plan_once(self, task: str, obs: Observation, out: PickOutcome,
-                         alternative: int) -> tuple[GraspPlan, list[JointTrajectory | None]]:
+    async def _plan_once(
+        self, task: str, obs: Observation, out: PickOutcome, alternative: int
+    ) -> tuple[GraspPlan, list[JointTrajectory | None]]:
         q = await self.robot.joints()
         # everything on the table that is not the target is an obstacle for the carried object too
         target_cube = obs.cubes[0] if task == "sort-cubes" and obs.cubes else None
-        obs = replace(obs, obstacles=obs.obstacles + tuple(
-            _box_around(c.centroid, c.size / 2 + OBJECT_MARGIN_M) for c in obs.cubes if c is not target_cube
-        ) + tuple(_box_around(r.center, r.length / 2 + OBJECT_MARGIN_M) for r in obs.rods[1:]))
+        obs = replace(
+            obs,
+            obstacles=obs.obstacles
+            + tuple(
+                _box_around(c.centroid, c.size / 2 + OBJECT_MARGIN_M)
+                for c in obs.cubes
+                if c is not target_cube
+            )
+            + tuple(_box_around(r.center, r.length / 2 + OBJECT_MARGIN_M) for r in obs.rods[1:]),
+        )
         if task == "stand-rod":
             rod = obs.rods[0]
             place = None
             if self.config.place_xy is not None:
-                cands = place_candidates(np.asarray(self.config.place_xy), np.asarray(self.config.place_region_min),
-                                         np.asarray(self.config.place_region_max))
+                cands = place_candidates(
+                    np.asarray(self.config.place_xy),
+                    np.asarray(self.config.place_region_min),
+                    np.asarray(self.config.place_region_max),
+                )
                 place = free_place_xy(obs, cands, self.config.place_clearance_m)
                 if place is None:
-                    raise PlanningError(f"no free spot to stand the rod near {self.config.place_xy} "
-                                        f"({len(cands)} candidates, clearance {self.config.place_clearance_m} m)")
+                    raise PlanningError(
+                        f"no free spot to stand the rod near {self.config.place_xy} "
+                        f"({len(cands)} candidates, clearance {self.config.place_clearance_m} m)"
+                    )
             # recovery options: grasp the rod at other points along it (a neighbour may block the
             # fingers at its centre; the twin notes show ±50 mm off-centre still stands the rod, and
             # ±75 mm (pads 14 mm inside the end) was seen to stand it in eval)
             offsets = self.config.grasp_offsets_m
             offset = offsets[alternative % len(offsets)]
-            plan = await self.grasp.plan_rod(rod, q, obs.obstacles, alternative // len(offsets), place, offset)
+            plan = await self.grasp.plan_rod(
+                rod, q, obs.obstacles, alternative // len(offsets), place, offset
+            )
             out.object_id = _object_id(rod)
         else:
             cube = obs.cubes[0]
@@ -250,8 +288,14 @@ class Orchestrator:
         T = w.T_base_tool.copy()
         if w.guard_force_n > 0:
             T[:3, 3] += w.guard_overtravel_m * w.guard_direction
-        traj = await self.motion.plan_linear(start, T, obs.obstacles, held, slow=w.guard_force_n > 0,
-                                             table_contact=lifting_off or w.guard_force_n > 0)
+        traj = await self.motion.plan_linear(
+            start,
+            T,
+            obs.obstacles,
+            held,
+            slow=w.guard_force_n > 0,
+            table_contact=lifting_off or w.guard_force_n > 0,
+        )
         if w.guard_force_n > 0 and w.guard_speed_m_s > 0:
             # a guarded approach goes no faster than the grasp plan's touch-down speed
             dist = float(np.linalg.norm(T[:3, 3] - (await self.motion.tool_pose(start))[:3, 3]))
@@ -271,18 +315,28 @@ class Orchestrator:
                 q_now = await self.robot.joints()
                 if np.max(np.abs(traj.positions[0] - q_now)) > RESUME_TOLERANCE_RAD:
                     # the arm is not where the plan assumed (a guarded stop, say): replan from here
-                    traj = await self._timed(self._motion_for(w, q_now, obs, plan), cfg.deadlines.plan_s,
-                                             f"replanning {w.name}")
+                    traj = await self._timed(
+                        self._motion_for(w, q_now, obs, plan), cfg.deadlines.plan_s, f"replanning {w.name}"
+                    )
                 if traj is not None:
-                    res = await self._timed(self.robot.execute(traj, w.guard_force_n), cfg.deadlines.motion_s,
-                                            f"motion to {w.name}")
-                    log.debug("%s: planned %.2f s, executed %.2f s%s", w.name, traj.duration, res.duration_s,
-                              " (stopped on touch-down)" if res.stopped_early else "")
+                    res = await self._timed(
+                        self.robot.execute(traj, w.guard_force_n),
+                        cfg.deadlines.motion_s,
+                        f"motion to {w.name}",
+                    )
+                    log.debug(
+                        "%s: planned %.2f s, executed %.2f s%s",
+                        w.name,
+                        traj.duration,
+                        res.duration_s,
+                        " (stopped on touch-down)" if res.stopped_early else "",
+                    )
                     if w.guard_force_n > 0 and not res.stopped_early:
                         log.warning("%s: no touch-down detected within the overtravel", w.name)
             if w.gripper is not None:
-                g = await self._timed(self.robot.gripper(w.gripper == "close"), cfg.deadlines.gripper_s,
-                                      f"gripper {w.gripper}")
+                g = await self._timed(
+                    self.robot.gripper(w.gripper == "close"), cfg.deadlines.gripper_s, f"gripper {w.gripper}"
+                )
                 if w.gripper == "close" and g.object_detected is False and cfg.verify_grasp:
                     raise GraspFailureError(f"{w.name}: the gripper closed on nothing")
             if state is CycleState.LIFT and cfg.verify_grasp and _is_last_of(plan, i, CycleState.LIFT):
@@ -299,8 +353,11 @@ class Orchestrator:
         q = await self.robot.joints()
         if np.max(np.abs(q - home)) < 1e-3:
             return
-        traj = await self._timed(self.motion.plan_joint(q, home, (), None), self.config.deadlines.plan_s,
-                                 "planning the way to safe home")
+        traj = await self._timed(
+            self.motion.plan_joint(q, home, (), None),
+            self.config.deadlines.plan_s,
+            "planning the way to safe home",
+        )
         await self._timed(self.robot.execute(traj), self.config.deadlines.motion_s, "moving to safe home")
 
     async def _return_home(self, plan: GraspPlan, obs: Observation) -> None:
@@ -311,8 +368,11 @@ class Orchestrator:
         try:
             q = await self.robot.joints()
             if np.max(np.abs(q - home)) > 1e-3:
-                traj = await self._timed(self.motion.plan_joint(q, home, obstacles, None),
-                                         self.config.deadlines.plan_s, "planning the way home")
+                traj = await self._timed(
+                    self.motion.plan_joint(q, home, obstacles, None),
+                    self.config.deadlines.plan_s,
+                    "planning the way home",
+                )
                 await self._timed(self.robot.execute(traj), self.config.deadlines.motion_s, "returning home")
         except SafetyError:
             raise
@@ -353,7 +413,9 @@ def _placed_box(plan: GraspPlan) -> SeenBox:
     # taller by what the collision model leaves out at the open jaw's tips (motion.tool finger
     # clearance + pad): a way home skimming the top would catch the rod with them and knock it over
     height += PLACED_TOP_CLEARANCE_M
-    return SeenBox(np.array([p[0] - radius, p[1] - radius, 0.0]), np.array([p[0] + radius, p[1] + radius, height]))
+    return SeenBox(
+        np.array([p[0] - radius, p[1] - radius, 0.0]), np.array([p[0] + radius, p[1] + radius, height])
+    )
 
 
 def _box_around(center: np.ndarray, half: float) -> SeenBox:

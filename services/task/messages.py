@@ -19,10 +19,18 @@ def _pose(values: list[float] | None) -> common_pb2.Pose | None:
 def pick_event_msg(o: PickOutcome, robot_id: str) -> task_pb2.PickEvent:
     msg = task_pb2.PickEvent(
         header=common_pb2.Header(stamp_ns=time.time_ns(), frame_id="base"),
-        pick_id=o.pick_id, robot_id=robot_id, object_id=o.object_id, object_class=o.object_class,
-        grasp_quality=o.grasp_quality, cycle_time_s=o.cycle_time_s, success=o.success,
-        stage_reached=o.stage_reached, failure_reason=o.failure_reason, error_code=o.error_code,
-        attempts=o.attempts, task=o.task,
+        pick_id=o.pick_id,
+        robot_id=robot_id,
+        object_id=o.object_id,
+        object_class=o.object_class,
+        grasp_quality=o.grasp_quality,
+        cycle_time_s=o.cycle_time_s,
+        success=o.success,
+        stage_reached=o.stage_reached,
+        failure_reason=o.failure_reason,
+        error_code=o.error_code,
+        attempts=o.attempts,
+        task=o.task,
     )
     for key, value in o.stage_durations_s.items():
         msg.stage_durations_s[key] = value

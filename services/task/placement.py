@@ -14,8 +14,13 @@ def _box_distance_xy(p: np.ndarray, box: SeenBox) -> float:
     return float(np.linalg.norm(d))
 
 
-def place_candidates(preferred_xy: np.ndarray, region_min: np.ndarray, region_max: np.ndarray,
-                     step_m: float = 0.04, rings: int = 4) -> list[np.ndarray]:
+def place_candidates(
+    preferred_xy: np.ndarray,
+    region_min: np.ndarray,
+    region_max: np.ndarray,
+    step_m: float = 0.04,
+    rings: int = 4,
+) -> list[np.ndarray]:
     """The preferred spot, then rings of 8·k spots around it, nearest first, inside the region."""
     out = [np.asarray(preferred_xy, dtype=float)]
     for k in range(1, rings + 1):
@@ -26,8 +31,9 @@ def place_candidates(preferred_xy: np.ndarray, region_min: np.ndarray, region_ma
     return [p for p in out if np.all(p >= region_min) and np.all(p <= region_max)]
 
 
-def free_place_xy(obs: Observation, candidates: list[np.ndarray], clearance_m: float,
-                  skip_rod: int | None = 0) -> np.ndarray | None:
+def free_place_xy(
+    obs: Observation, candidates: list[np.ndarray], clearance_m: float, skip_rod: int | None = 0
+) -> np.ndarray | None:
     """The first candidate at least ``clearance_m`` (plus the objects' own size) from every other
     object on the table; the rod being moved (index ``skip_rod``) does not count."""
     for p in candidates:

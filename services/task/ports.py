@@ -87,20 +87,35 @@ class VisionPort(Protocol):
 
 
 class GraspPort(Protocol):
-    async def plan_rod(self, rod: SeenRod, q_now: np.ndarray, obstacles: tuple[SeenBox, ...],
-                       alternative: int, place_xy: np.ndarray | None = None,
-                       grasp_offset_m: float | None = None) -> GraspPlan: ...
+    async def plan_rod(
+        self,
+        rod: SeenRod,
+        q_now: np.ndarray,
+        obstacles: tuple[SeenBox, ...],
+        alternative: int,
+        place_xy: np.ndarray | None = None,
+        grasp_offset_m: float | None = None,
+    ) -> GraspPlan: ...
 
-    async def plan_cube(self, cube: SeenCube, q_now: np.ndarray, obstacles: tuple[SeenBox, ...],
-                        alternative: int) -> GraspPlan: ...
+    async def plan_cube(
+        self, cube: SeenCube, q_now: np.ndarray, obstacles: tuple[SeenBox, ...], alternative: int
+    ) -> GraspPlan: ...
 
 
 class MotionPort(Protocol):
-    async def plan_joint(self, start: np.ndarray, goal: np.ndarray, obstacles: tuple[SeenBox, ...],
-                         held: object | None) -> JointTrajectory: ...
+    async def plan_joint(
+        self, start: np.ndarray, goal: np.ndarray, obstacles: tuple[SeenBox, ...], held: object | None
+    ) -> JointTrajectory: ...
 
-    async def plan_linear(self, start: np.ndarray, T_goal: np.ndarray, obstacles: tuple[SeenBox, ...],
-                          held: object | None, slow: bool = False, table_contact: bool = False) -> JointTrajectory:
+    async def plan_linear(
+        self,
+        start: np.ndarray,
+        T_goal: np.ndarray,
+        obstacles: tuple[SeenBox, ...],
+        held: object | None,
+        slow: bool = False,
+        table_contact: bool = False,
+    ) -> JointTrajectory:
         """A straight tool line; ``table_contact`` lets the held object touch the table (lift-off,
         set-down)."""
 

@@ -37,10 +37,18 @@ def cycle_config(settings: Settings) -> CycleConfig:
     t = settings.task
     home_deg = settings.grasp.safe_home_joints_deg.get(settings.robot.model)
     return CycleConfig(
-        limits=RetryLimits(detect=t.detect_retries, grasp_variants=t.grasp_alternatives,
-                           alarms=t.alarm_recoveries, regrasps=t.regrasps),
-        deadlines=StateDeadlines(detect_s=t.detect_deadline_s, plan_s=t.plan_deadline_s,
-                                 motion_s=t.motion_deadline_s, gripper_s=t.gripper_deadline_s),
+        limits=RetryLimits(
+            detect=t.detect_retries,
+            grasp_variants=t.grasp_alternatives,
+            alarms=t.alarm_recoveries,
+            regrasps=t.regrasps,
+        ),
+        deadlines=StateDeadlines(
+            detect_s=t.detect_deadline_s,
+            plan_s=t.plan_deadline_s,
+            motion_s=t.motion_deadline_s,
+            gripper_s=t.gripper_deadline_s,
+        ),
         detect_retry_delay_s=t.detect_retry_delay_s,
         verify_grasp=t.verify_grasp,
         home_joints=tuple(float(np.deg2rad(v)) for v in home_deg) if home_deg is not None else None,
@@ -50,8 +58,13 @@ def cycle_config(settings: Settings) -> CycleConfig:
 class TaskRunner:
     """Runs cycles, tracks counters and status, and reports every outcome."""
 
-    def __init__(self, settings: Settings, clients: CellClients, bus: Bus | None = None,
-                 between_cycles: Callable[[], object] | None = None):
+    def __init__(
+        self,
+        settings: Settings,
+        clients: CellClients,
+        bus: Bus | None = None,
+        between_cycles: Callable[[], object] | None = None,
+    ):
         self.settings = settings
         self.clients = clients
         self.bus = bus
@@ -68,8 +81,14 @@ class TaskRunner:
         self._status_queues: set[asyncio.Queue[task_pb2.TaskStatus]] = set()
         self._loop_task: asyncio.Task[None] | None = None
         self._seq = 0
-        self.orchestrator = Orchestrator(clients.vision, clients.grasp, clients.motion, clients.robot,
-                                         cycle_config(settings), on_state=self._on_state)
+        self.orchestrator = Orchestrator(
+            clients.vision,
+            clients.grasp,
+            clients.motion,
+            clients.robot,
+            cycle_config(settings),
+            on_state=self._on_state,
+        )
 
     # ------------------------------------------------------------------ status
     @property
@@ -82,10 +101,16 @@ class TaskRunner:
         self._seq += 1
         return task_pb2.TaskStatus(
             header=common_pb2.Header(stamp_ns=time.time_ns(), frame_id="base", seq=self._seq),
-            state=self.state.value, message=self.message, progress=PROGRESS.get(self.state, 0.0),
-            picks_completed=self.counters.picks_completed, picks_failed=self.counters.picks_failed,
-            average_cycle_time=self.counters.average_cycle_time, task=self.task, running=self.running,
-            cycle_index=self.cycle_index, last_error=self.last_error,
+            state=self.state.value,
+            message=self.message,
+            progress=PROGRESS.get(self.state, 0.0),
+            picks_completed=self.counters.picks_completed,
+            picks_failed=self.counters.picks_failed,
+            average_cycle_time=self.counters.average_cycle_time,
+            task=self.task,
+            running=self.running,
+            cycle_index=self.cycle_index,
+            last_error=self.last_error,
         )
 
     def publish_status(self) -> None:
@@ -234,8 +259,13 @@ class TaskControllerServicer(task_pb2_grpc.TaskControllerServicer):
 
 
 class TaskService:
-    def __init__(self, settings: Settings, bus: Bus | None = None, grpc_port: int | None = None,
-                 clients: CellClients | None = None):
+    def __init__(
+        self,
+        settings: Settings,
+        bus: Bus | None = None,
+        grpc_port: int | None = None,
+        clients: CellClients | None = None,
+    ):
         self.settings = settings
         self.clients = clients or CellClients(settings)
         self.runner = TaskRunner(settings, self.clients, bus)

@@ -46,7 +46,9 @@ class CharucoTarget:
                 f"dictionary {name} has {self.dictionary.bytesList.shape[0]}"
             )
         self.board = cv2.aruco.CharucoBoard(
-            (settings.squares_x, settings.squares_y), settings.square_length_m, settings.marker_length_m,
+            (settings.squares_x, settings.squares_y),
+            settings.square_length_m,
+            settings.marker_length_m,
             self.dictionary,
         )
         params = cv2.aruco.DetectorParameters()
@@ -73,8 +75,9 @@ class CharucoTarget:
     def image(self, px_per_square: int = 100) -> Array:
         """The printable board (uint8, white squares and markers, no margin)."""
         s = self.settings
-        return self.board.generateImage((s.squares_x * px_per_square, s.squares_y * px_per_square), marginSize=0,
-                                        borderBits=1)
+        return self.board.generateImage(
+            (s.squares_x * px_per_square, s.squares_y * px_per_square), marginSize=0, borderBits=1
+        )
 
     def detect(self, image: Array, intr: CameraIntrinsics, min_corners: int = 6) -> BoardObservation | None:
         """Find the board and its pose; None when fewer than ``min_corners`` corners are seen."""
@@ -105,5 +108,6 @@ class CharucoTarget:
         T = np.eye(4)
         T[:3, :3] = cv2.Rodrigues(rvec)[0]
         T[:3, 3] = tvec.ravel()
-        return BoardObservation(T_camera_board=T, image_points=img_pts, object_points=obj_pts, ids=ids,
-                                reprojection_rms_px=rms)
+        return BoardObservation(
+            T_camera_board=T, image_points=img_pts, object_points=obj_pts, ids=ids, reprojection_rms_px=rms
+        )

@@ -92,8 +92,10 @@ def generate_calibration_poses(
             p[long_axis] = lo[long_axis] + (i + rng.uniform(0.1, 0.9)) / n * (hi - lo)[long_axis]
             z_board = p - cam  # into the board = away from the camera
             z_board /= np.linalg.norm(z_board)
-            tilt = Rotation.from_rotvec(_random_perpendicular(z_board, rng) * np.deg2rad(
-                rng.uniform(0.3, 1.0) * settings.max_tilt_deg))
+            tilt = Rotation.from_rotvec(
+                _random_perpendicular(z_board, rng)
+                * np.deg2rad(rng.uniform(0.3, 1.0) * settings.max_tilt_deg)
+            )
             spin = Rotation.from_rotvec(z_board * np.deg2rad(rng.uniform(-30.0, 30.0)))
             R_face = _frame_with_z(z_board, X[:3, 1])  # board y roughly along the image's y
             R = (tilt * spin).as_matrix() @ R_face
@@ -115,7 +117,9 @@ def _in_view(T_camera_board: Array, corners: Array, intr: CameraIntrinsics, marg
         return False
     u = intr.fx * pc[:, 0] / pc[:, 2] + intr.cx
     v = intr.fy * pc[:, 1] / pc[:, 2] + intr.cy
-    return bool(np.all((u >= margin) & (u <= intr.width - margin) & (v >= margin) & (v <= intr.height - margin)))
+    return bool(
+        np.all((u >= margin) & (u <= intr.width - margin) & (v >= margin) & (v <= intr.height - margin))
+    )
 
 
 def _random_perpendicular(v: Array, rng: np.random.Generator) -> Array:
@@ -182,18 +186,27 @@ def _report(progress: Progress | None, done: int, total: int, message: str) -> N
         progress(done, total, message)
 
 
-def solve_from_observations(data: CalibrationData, camera_K: Array, distortion: Array | None = None) -> HandEyeResult:
+def solve_from_observations(
+    data: CalibrationData, camera_K: Array, distortion: Array | None = None
+) -> HandEyeResult:
     """Hand-eye solve over the accepted views, with the reprojection residual filled in."""
     if len(data.observations) < 3:
         raise VisionError(
-            f"only {len(data.observations)} usable board views (need ≥ 3); skipped: " + "; ".join(data.skipped[:5])
+            f"only {len(data.observations)} usable board views (need ≥ 3); skipped: "
+            + "; ".join(data.skipped[:5])
         )
     # every distinct corner seen: a stride through the stacked rows would pick one column of the
     # grid, a line, about which the board mount's rotation is unobservable
     corners = np.unique(np.round(np.vstack([o.object_points for o in data.observations]), 6), axis=0)
     result = solve_eye_to_hand(data.T_base_gripper, data.T_camera_board, board_points=corners)
-    rms = reprojection_rms(result, data.T_base_gripper, [o.object_points for o in data.observations],
-                           [o.image_points for o in data.observations], camera_K, distortion)
+    rms = reprojection_rms(
+        result,
+        data.T_base_gripper,
+        [o.object_points for o in data.observations],
+        [o.image_points for o in data.observations],
+        camera_K,
+        distortion,
+    )
     return HandEyeResult(**{**result.__dict__, "reprojection_rms_px": rms})
 
 
@@ -208,17 +221,28 @@ async def run_calibration(
 ) -> tuple[HandEyeResult, CalibrationData]:
     """Generate poses, collect views, solve, and (if ``out_path``) write the calibration file."""
     target = CharucoTarget(settings.board)
-    Y_guess = (np.asarray(settings.board.T_gripper_board_guess, dtype=float)
-               if settings.board.T_gripper_board_guess is not None else default_T_gripper_board(target))
-    poses = generate_calibration_poses(settings.n_poses, settings, T_base_camera_guess, Y_guess,
-                                       target.outline, np.random.default_rng(seed), camera.intrinsics)
+    Y_guess = (
+        np.asarray(settings.board.T_gripper_board_guess, dtype=float)
+        if settings.board.T_gripper_board_guess is not None
+        else default_T_gripper_board(target)
+    )
+    poses = generate_calibration_poses(
+        settings.n_poses,
+        settings,
+        T_base_camera_guess,
+        Y_guess,
+        target.outline,
+        np.random.default_rng(seed),
+        camera.intrinsics,
+    )
     data = await collect_observations(robot, camera, target, poses, settings, progress)
     intr = camera.intrinsics
     dist = np.asarray(intr.distortion, dtype=float) if intr.distortion else None
     result = solve_from_observations(data, intr.K, dist)
     if out_path is not None:
-        record = calibration_record(result.T_base_camera, method=result.method, result=result,
-                                    timestamp=dt.datetime.now(dt.UTC))
+        record = calibration_record(
+            result.T_base_camera, method=result.method, result=result, timestamp=dt.datetime.now(dt.UTC)
+        )
         write_calibration(out_path, record)
     return result, data
 
@@ -237,5 +261,11 @@ async def check_calibration(
     data = await collect_observations(robot, camera, target, poses, settings, progress)
     if not data.observations:
         raise VisionError("drift check saw the board in none of the poses: " + "; ".join(data.skipped[:5]))
-    return check_drift(T_base_camera, T_gripper_board, data.T_base_gripper, data.T_camera_board,
-                       settings.drift_warn_m, settings.drift_warn_deg)
+    return check_drift(
+        T_base_camera,
+        T_gripper_board,
+        data.T_base_gripper,
+        data.T_camera_board,
+        settings.drift_warn_m,
+        settings.drift_warn_deg,
+    )

@@ -44,7 +44,9 @@ MIN_POSES = 3
 
 # --- manual (seed 001 PoC) ------------------------------------------------------------------------
 def manual_T_base_camera(
-    translation_m: Sequence[float], rpy_deg: Sequence[float] | None = None, quat_xyzw: Sequence[float] | None = None
+    translation_m: Sequence[float],
+    rpy_deg: Sequence[float] | None = None,
+    quat_xyzw: Sequence[float] | None = None,
 ) -> Array:
     """T_base_camera from a measured camera position (m) and orientation (fixed-XYZ rpy in degrees, or xyzw).
 
@@ -83,14 +85,18 @@ def _rot_log(R: Array) -> Array:
     return Rotation.from_matrix(R).as_rotvec()
 
 
-def _validate_pairs(T_base_gripper: Sequence[Array], T_camera_board: Sequence[Array]) -> tuple[list[Array], list[Array]]:
+def _validate_pairs(
+    T_base_gripper: Sequence[Array], T_camera_board: Sequence[Array]
+) -> tuple[list[Array], list[Array]]:
     if len(T_base_gripper) != len(T_camera_board):
         raise InvalidInputError(
             f"need one board observation per robot pose, got {len(T_base_gripper)} poses and "
             f"{len(T_camera_board)} observations"
         )
     if len(T_base_gripper) < MIN_POSES:
-        raise InvalidInputError(f"hand-eye calibration needs at least {MIN_POSES} poses, got {len(T_base_gripper)}")
+        raise InvalidInputError(
+            f"hand-eye calibration needs at least {MIN_POSES} poses, got {len(T_base_gripper)}"
+        )
     G = [check_transform(T, f"T_base_gripper[{i}]") for i, T in enumerate(T_base_gripper)]
     C = [check_transform(T, f"T_camera_board[{i}]") for i, T in enumerate(T_camera_board)]
     return G, C
@@ -135,12 +141,17 @@ def _closed_form_X(G: list[Array], C: list[Array], backend: str) -> tuple[Array,
     if backend == "auto":
         backend = hand_eye_backends()[0]
     if backend not in hand_eye_backends():
-        raise ConfigurationError(f"hand-eye backend {backend!r} is not available here; use one of {hand_eye_backends()}")
+        raise ConfigurationError(
+            f"hand-eye backend {backend!r} is not available here; use one of {hand_eye_backends()}"
+        )
     if backend == "opencv":
         G_inv = [invert_transform(g) for g in G]  # eye-to-hand: base→gripper in place of gripper→base
         R, t = cv2.calibrateHandEye(  # type: ignore[attr-defined]
-            [g[:3, :3] for g in G_inv], [g[:3, 3] for g in G_inv],
-            [c[:3, :3] for c in C], [c[:3, 3] for c in C], method=cv2.CALIB_HAND_EYE_PARK,
+            [g[:3, :3] for g in G_inv],
+            [g[:3, 3] for g in G_inv],
+            [c[:3, :3] for c in C],
+            [c[:3, 3] for c in C],
+            method=cv2.CALIB_HAND_EYE_PARK,
         )
         return make_transform(R, np.ravel(t)), "cv2.calibrateHandEye(PARK)"
     # Y = G_i⁻¹ X C_i for every i, so for each pair (G_i G_j⁻¹) X = X (C_i C_j⁻¹): A X = X B.
@@ -193,13 +204,20 @@ def solve_eye_to_hand(
     X, method = _closed_form_X(G, C, backend)
     Y = _mean_transform([invert_transform(g) @ X @ c for g, c in zip(G, C, strict=True)])
     if refine:
-        pts = np.array([[0, 0, 0], [0.2, 0, 0], [0, 0.2, 0], [0.2, 0.2, 0]], float) if board_points is None \
+        pts = (
+            np.array([[0, 0, 0], [0.2, 0, 0], [0, 0.2, 0], [0.2, 0.2, 0]], float)
+            if board_points is None
             else np.asarray(board_points, dtype=float).reshape(-1, 3)
-        if not np.all(np.isfinite(pts)) or len(pts) < 3 \
-                or np.linalg.svd(pts - pts.mean(axis=0), compute_uv=False)[1] < 1e-3 * max(np.ptp(pts), 1e-9):
+        )
+        if (
+            not np.all(np.isfinite(pts))
+            or len(pts) < 3
+            or np.linalg.svd(pts - pts.mean(axis=0), compute_uv=False)[1] < 1e-3 * max(np.ptp(pts), 1e-9)
+        ):
             raise InvalidInputError(
                 "board_points must be ≥ 3 finite points spanning a plane: on a line, the board mount's "
-                "rotation about that line is unobservable")
+                "rotation about that line is unobservable"
+            )
         ph = np.column_stack([pts, np.ones(len(pts))]).T  # (4, K)
 
         # Refine small corrections about the closed-form start, not absolute rotation vectors: a
@@ -209,7 +227,9 @@ def solve_eye_to_hand(
 
         def residuals(v: Array) -> Array:
             Xv, Yv = X0 @ _vec_pose(v[:6]), Y0 @ _vec_pose(v[6:])
-            return np.concatenate([((g @ Yv) @ ph - (Xv @ c) @ ph)[:3].ravel() for g, c in zip(G, C, strict=True)])
+            return np.concatenate(
+                [((g @ Yv) @ ph - (Xv @ c) @ ph)[:3].ravel() for g, c in zip(G, C, strict=True)]
+            )
 
         sol = least_squares(residuals, np.zeros(12), method="lm")
         X, Y = X0 @ _vec_pose(sol.x[:6]), Y0 @ _vec_pose(sol.x[6:])
@@ -217,15 +237,24 @@ def solve_eye_to_hand(
     X = check_transform(X, "T_base_camera")
     d_t, d_r = board_disagreement(X, Y, G, C)
     return HandEyeResult(
-        T_base_camera=X, T_gripper_board=Y, method=method, n_poses=len(G),
-        translation_rms_m=float(np.sqrt(np.mean(d_t**2))), translation_max_m=float(d_t.max()),
-        rotation_rms_deg=float(np.sqrt(np.mean(d_r**2))), rotation_max_deg=float(d_r.max()),
+        T_base_camera=X,
+        T_gripper_board=Y,
+        method=method,
+        n_poses=len(G),
+        translation_rms_m=float(np.sqrt(np.mean(d_t**2))),
+        translation_max_m=float(d_t.max()),
+        rotation_rms_deg=float(np.sqrt(np.mean(d_r**2))),
+        rotation_max_deg=float(d_r.max()),
     )
 
 
 def reprojection_rms(
-    result: HandEyeResult, T_base_gripper: Sequence[Array], object_points: Sequence[Array],
-    image_points: Sequence[Array], K: Array, distortion: Array | None = None,
+    result: HandEyeResult,
+    T_base_gripper: Sequence[Array],
+    object_points: Sequence[Array],
+    image_points: Sequence[Array],
+    K: Array,
+    distortion: Array | None = None,
 ) -> float:
     """RMS pixel error of the board corners predicted from the robot poses through the calibration."""
     T_camera_base = invert_transform(result.T_base_camera)
@@ -251,8 +280,12 @@ class DriftReport:
 
 
 def check_drift(
-    T_base_camera: Array, T_gripper_board: Array, T_base_gripper: Sequence[Array], T_camera_board: Sequence[Array],
-    warn_m: float = 0.005, warn_deg: float = 1.0,
+    T_base_camera: Array,
+    T_gripper_board: Array,
+    T_base_gripper: Sequence[Array],
+    T_camera_board: Sequence[Array],
+    warn_m: float = 0.005,
+    warn_deg: float = 1.0,
 ) -> DriftReport:
     """Compare where the board is seen (through the calibration) with where the robot says it is."""
     if len(T_base_gripper) == 0 or len(T_base_gripper) != len(T_camera_board):
@@ -266,17 +299,23 @@ def check_drift(
     C = [check_transform(T, f"T_camera_board[{i}]") for i, T in enumerate(T_camera_board)]
     d_t, d_r = board_disagreement(X, Y, G, C)
     ok = bool(d_t.max() <= warn_m and d_r.max() <= warn_deg)
-    msg = (f"calibration holds: board within {d_t.max() * 1000:.1f} mm / {d_r.max():.2f}° of the robot's pose"
-           if ok else
-           f"calibration drifted: board seen {d_t.max() * 1000:.1f} mm / {d_r.max():.2f}° from where the robot "
-           f"holds it (limits {warn_m * 1000:.1f} mm / {warn_deg:.2f}°): recalibrate")
+    msg = (
+        f"calibration holds: board within {d_t.max() * 1000:.1f} mm / {d_r.max():.2f}° of the robot's pose"
+        if ok
+        else f"calibration drifted: board seen {d_t.max() * 1000:.1f} mm / {d_r.max():.2f}° from where the robot "
+        f"holds it (limits {warn_m * 1000:.1f} mm / {warn_deg:.2f}°): recalibrate"
+    )
     return DriftReport(d_t, d_r, float(d_t.max()), float(d_r.max()), ok, msg)
 
 
 # --- calibration file -------------------------------------------------------------------------------
 def calibration_record(
-    T_base_camera: Array, *, method: str, timestamp: dt.datetime | None = None,
-    result: HandEyeResult | None = None, notes: str = "",
+    T_base_camera: Array,
+    *,
+    method: str,
+    timestamp: dt.datetime | None = None,
+    result: HandEyeResult | None = None,
+    notes: str = "",
 ) -> dict[str, Any]:
     """The YAML-ready dict of a calibration (pure: the caller writes it)."""
     T = check_transform(T_base_camera, "T_base_camera")
@@ -295,8 +334,10 @@ def calibration_record(
         rec["n_poses"] = result.n_poses
         rec["T_gripper_board"] = [[float(v) for v in row] for row in result.T_gripper_board]
         rec["residuals"] = {
-            "translation_rms_m": result.translation_rms_m, "translation_max_m": result.translation_max_m,
-            "rotation_rms_deg": result.rotation_rms_deg, "rotation_max_deg": result.rotation_max_deg,
+            "translation_rms_m": result.translation_rms_m,
+            "translation_max_m": result.translation_max_m,
+            "rotation_rms_deg": result.rotation_rms_deg,
+            "rotation_max_deg": result.rotation_max_deg,
             "reprojection_rms_px": result.reprojection_rms_px,
         }
     if notes:
@@ -329,7 +370,9 @@ def read_calibration(path: str | Path) -> CalibrationFile:
     try:
         data = yaml.safe_load(p.read_text())
     except FileNotFoundError as exc:
-        raise ConfigurationError(f"no calibration file at {p}: run `pickplace calibrate` or set a manual pose") from exc
+        raise ConfigurationError(
+            f"no calibration file at {p}: run `pickplace calibrate` or set a manual pose"
+        ) from exc
     except yaml.YAMLError as exc:
         raise ConfigurationError(f"calibration file {p} is not valid YAML: {exc}") from exc
     if not isinstance(data, dict) or "T_base_camera" not in data:
@@ -341,5 +384,7 @@ def read_calibration(path: str | Path) -> CalibrationFile:
     try:
         stamp = dt.datetime.fromisoformat(str(data.get("timestamp")))
     except ValueError as exc:
-        raise ConfigurationError(f"calibration file {p} has no valid ISO timestamp: {data.get('timestamp')!r}") from exc
+        raise ConfigurationError(
+            f"calibration file {p} has no valid ISO timestamp: {data.get('timestamp')!r}"
+        ) from exc
     return CalibrationFile(T_base_camera=T, timestamp=stamp, method=str(data.get("method", "")), record=data)

@@ -30,11 +30,15 @@ from services.common.errors import (
 from services.common.settings import REPO_ROOT, Settings, load_settings
 from services.vision.camera import Camera
 
-app = typer.Typer(help="Vision: detect on recordings, record frames, calibrate the camera.", no_args_is_help=True)
+app = typer.Typer(
+    help="Vision: detect on recordings, record frames, calibrate the camera.", no_args_is_help=True
+)
 console = Console()
 
 ProfileOpt = Annotated[str | None, typer.Option("--profile", "-p", help="config profile (sim, nova5-real)")]
-SourceOpt = Annotated[str, typer.Option("--source", help="camera: realsense | replay | bus | twin (default: settings)")]
+SourceOpt = Annotated[
+    str, typer.Option("--source", help="camera: realsense | replay | bus | twin (default: settings)")
+]
 
 
 def _settings(profile: str | None) -> Settings:
@@ -131,16 +135,28 @@ def _print_result(result, seq: int) -> None:  # type: ignore[no-untyped-def]
     for col in ("object", "frame", "x (m)", "y (m)", "z (m)", "details"):
         table.add_column(col)
     for k, rod in enumerate(result.rods, start=1):
-        frame_name, p = ("base", rod.center_base) if rod.center_base is not None else ("camera", rod.center_cam)
-        table.add_row(f"rod #{k}", frame_name, *(f"{v:.4f}" for v in p),
-                      f"conf {rod.confidence:.2f}, L {rod.length_m * 1e3:.0f} mm, {rod.method}")
+        frame_name, p = (
+            ("base", rod.center_base) if rod.center_base is not None else ("camera", rod.center_cam)
+        )
+        table.add_row(
+            f"rod #{k}",
+            frame_name,
+            *(f"{v:.4f}" for v in p),
+            f"conf {rod.confidence:.2f}, L {rod.length_m * 1e3:.0f} mm, {rod.method}",
+        )
     for cube in result.cubes:
-        frame_name, p = ("base", cube.centroid_base) if cube.centroid_base is not None else ("camera", cube.centroid_cam)
+        frame_name, p = (
+            ("base", cube.centroid_base) if cube.centroid_base is not None else ("camera", cube.centroid_cam)
+        )
         table.add_row(f"{cube.color_label} cube", frame_name, *(f"{v:.4f}" for v in p), f"{cube.n_points} px")
     for box in result.obstacles:
         lo, hi = (box.min_base, box.max_base) if box.min_base is not None else (box.min_cam, box.max_cam)
-        table.add_row("obstacle", "base" if box.min_base is not None else "camera",
-                      *(f"{a:.3f}..{b:.3f}" for a, b in zip(lo, hi, strict=True)), box.color_label)
+        table.add_row(
+            "obstacle",
+            "base" if box.min_base is not None else "camera",
+            *(f"{a:.3f}..{b:.3f}" for a, b in zip(lo, hi, strict=True)),
+            box.color_label,
+        )
     console.print(table)
     for note in result.notes:
         console.print(f"  [dim]{note}[/dim]")
@@ -151,7 +167,9 @@ def _print_result(result, seq: int) -> None:  # type: ignore[no-untyped-def]
 def record(
     out: Annotated[Path, typer.Option("--out", help="empty directory for the frame set")],
     frames: Annotated[int, typer.Option(min=1, max=100000)] = 30,
-    period_s: Annotated[float, typer.Option(min=0.0, help="seconds between frames (0 = as fast as possible)")] = 0.0,
+    period_s: Annotated[
+        float, typer.Option(min=0.0, help="seconds between frames (0 = as fast as possible)")
+    ] = 0.0,
     source: SourceOpt = "",
     seed: Annotated[int, typer.Option(min=0, help="scene seed for --source twin")] = 0,
     profile: ProfileOpt = None,
@@ -203,8 +221,10 @@ class GrpcCalibrationRobot:
         from services.common.grpc_util import rpc_errors
 
         with rpc_errors():
-            js = await self._stub.GetJointStates(robot_pb2.GetJointStatesRequest(),  # type: ignore[union-attr]
-                                                 timeout=self.settings.grpc.request_timeout_s)
+            js = await self._stub.GetJointStates(
+                robot_pb2.GetJointStatesRequest(),  # type: ignore[union-attr]
+                timeout=self.settings.grpc.request_timeout_s,
+            )
         return np.asarray(js.position, dtype=float)
 
     async def move_to_pose(self, T_base_gripper: np.ndarray) -> None:
@@ -217,7 +237,8 @@ class GrpcCalibrationRobot:
         with rpc_errors():
             reply = await self._stub.MoveJoints(  # type: ignore[union-attr]
                 robot_pb2.MoveJointsRequest(positions=[float(v) for v in q], speed_ratio=self.speed_ratio),
-                timeout=self.settings.robot.motion_timeout_s)
+                timeout=self.settings.robot.motion_timeout_s,
+            )
         if not reply.success:
             raise ExecutionError(f"move to a calibration pose failed: {reply.message}")
         await asyncio.sleep(self.settle_s)
@@ -228,8 +249,9 @@ class GrpcCalibrationRobot:
         return fk(self.spec, await self._joints())
 
 
-def _guess(settings: Settings, xyz: tuple[float, float, float] | None,
-           rpy: tuple[float, float, float] | None) -> np.ndarray:
+def _guess(
+    settings: Settings, xyz: tuple[float, float, float] | None, rpy: tuple[float, float, float] | None
+) -> np.ndarray:
     from services.vision.calibration import manual_T_base_camera
     from services.vision.service import load_T_base_camera
 
@@ -237,13 +259,17 @@ def _guess(settings: Settings, xyz: tuple[float, float, float] | None,
         return manual_T_base_camera(xyz, rpy_deg=rpy)
     T, _ = load_T_base_camera(settings.vision.calibration)
     if T is None:
-        raise ConfigurationError("no camera pose to aim the board at: give --guess-xyz and --guess-rpy "
-                                 "(a rough measurement is enough) or set vision.calibration.manual_*")
+        raise ConfigurationError(
+            "no camera pose to aim the board at: give --guess-xyz and --guess-rpy "
+            "(a rough measurement is enough) or set vision.calibration.manual_*"
+        )
     return T
 
 
 @contextlib.asynccontextmanager
-async def _live_calibration_cell(settings: Settings, source: str, seed: int) -> AsyncIterator[tuple[Camera, Settings]]:
+async def _live_calibration_cell(
+    settings: Settings, source: str, seed: int
+) -> AsyncIterator[tuple[Camera, Settings]]:
     """The configured camera; the robot is the running robot-driver service."""
     with open_camera(settings, source, seed) as cam:
         yield cam, settings
@@ -258,18 +284,28 @@ async def _twin_calibration_cell(settings: Settings) -> AsyncIterator[tuple[Came
     from services.sim.app import build_sim_server
     from services.sim.twin.camera import TwinCamera
 
-    server = build_sim_server(settings, "twin", q0_deg=settings.sim.twin.initial_joints_deg,
-                              ports={"dashboard": 0, "feedback": 0, "slow": 0})
+    server = build_sim_server(
+        settings,
+        "twin",
+        q0_deg=settings.sim.twin.initial_joints_deg,
+        ports={"dashboard": 0, "feedback": 0, "slow": 0},
+    )
     async with server:
-        robot = settings.robot.model_copy(update={"host": "127.0.0.1", "dashboard_port": server.ports["dashboard"],
-                                                  "feedback_port": server.ports["feedback"]})
+        robot = settings.robot.model_copy(
+            update={
+                "host": "127.0.0.1",
+                "dashboard_port": server.ports["dashboard"],
+                "feedback_port": server.ports["feedback"],
+            }
+        )
         s = settings.model_copy(update={"robot": robot})
         camera = TwinCamera(server.controller.engine, seed=settings.sim.seed)
         try:
             async with RobotService(s, bus=None, grpc_port=0) as svc:
                 await svc.driver.enable()
-                grpc = s.grpc.model_copy(update={"host": "127.0.0.1", "robot_port": svc.grpc_port,
-                                                 "robot_host": None})
+                grpc = s.grpc.model_copy(
+                    update={"host": "127.0.0.1", "robot_port": svc.grpc_port, "robot_host": None}
+                )
                 yield camera, s.model_copy(update={"grpc": grpc})
         finally:
             camera.close()
@@ -277,10 +313,18 @@ async def _twin_calibration_cell(settings: Settings) -> AsyncIterator[tuple[Came
 
 @app.command("calibrate")
 def calibrate(
-    poses: Annotated[int | None, typer.Option(min=3, max=200, help="number of poses (default: settings)")] = None,
-    out: Annotated[Path | None, typer.Option(help="calibration file (default: vision.calibration.file)")] = None,
-    guess_xyz: Annotated[tuple[float, float, float] | None, typer.Option(help="rough camera position (m)")] = None,
-    guess_rpy: Annotated[tuple[float, float, float] | None, typer.Option(help="rough camera rpy (deg)")] = None,
+    poses: Annotated[
+        int | None, typer.Option(min=3, max=200, help="number of poses (default: settings)")
+    ] = None,
+    out: Annotated[
+        Path | None, typer.Option(help="calibration file (default: vision.calibration.file)")
+    ] = None,
+    guess_xyz: Annotated[
+        tuple[float, float, float] | None, typer.Option(help="rough camera position (m)")
+    ] = None,
+    guess_rpy: Annotated[
+        tuple[float, float, float] | None, typer.Option(help="rough camera rpy (deg)")
+    ] = None,
     speed: Annotated[int, typer.Option(min=1, max=100, help="speed ratio of the calibration moves (%)")] = 20,
     source: SourceOpt = "",
     seed: Annotated[int, typer.Option(min=0, help="pose generator seed")] = 0,
@@ -313,10 +357,12 @@ def calibrate(
         for why in data.skipped:
             console.print(f"  [yellow]{why}[/yellow]")
         t = result.T_base_camera[:3, 3]
-        console.print(f"T_base_camera from {result.n_poses} views ({result.method}): position "
-                      f"({t[0]:.4f}, {t[1]:.4f}, {t[2]:.4f}) m; board consistency "
-                      f"{result.translation_rms_m * 1e3:.2f} mm / {result.rotation_rms_deg:.2f}° rms; "
-                      f"reprojection {result.reprojection_rms_px:.2f} px")
+        console.print(
+            f"T_base_camera from {result.n_poses} views ({result.method}): position "
+            f"({t[0]:.4f}, {t[1]:.4f}, {t[2]:.4f}) m; board consistency "
+            f"{result.translation_rms_m * 1e3:.2f} mm / {result.rotation_rms_deg:.2f}° rms; "
+            f"reprojection {result.reprojection_rms_px:.2f} px"
+        )
         console.print(f"written to {path}")
 
     try:
@@ -328,8 +374,12 @@ def calibrate(
 @app.command("calibrate-manual")
 def calibrate_manual(
     xyz: Annotated[tuple[float, float, float], typer.Option(help="camera position in the base frame (m)")],
-    rpy: Annotated[tuple[float, float, float], typer.Option(help="camera optical-frame rpy, fixed XYZ (deg)")],
-    out: Annotated[Path | None, typer.Option(help="calibration file (default: vision.calibration.file)")] = None,
+    rpy: Annotated[
+        tuple[float, float, float], typer.Option(help="camera optical-frame rpy, fixed XYZ (deg)")
+    ],
+    out: Annotated[
+        Path | None, typer.Option(help="calibration file (default: vision.calibration.file)")
+    ] = None,
     profile: ProfileOpt = None,
 ) -> None:
     """Write a measured camera pose as the calibration (seed 001's PoC path)."""
@@ -340,8 +390,9 @@ def calibrate_manual(
         T = manual_T_base_camera(xyz, rpy_deg=rpy)
     except RobotError as exc:
         raise _fail(exc) from None
-    path = write_calibration(_calibration_path(s, out), calibration_record(T, method="manual",
-                                                                           notes="measured by hand"))
+    path = write_calibration(
+        _calibration_path(s, out), calibration_record(T, method="manual", notes="measured by hand")
+    )
     console.print(f"manual calibration written to {path}")
 
 
@@ -364,13 +415,22 @@ def calibration_check(
     async def main() -> bool:
         saved = read_calibration(_calibration_path(s, None))
         if "T_gripper_board" not in saved.record:
-            raise ConfigurationError("the calibration file has no board mount (a manual calibration): "
-                                     "run `pickplace calibrate` first")
+            raise ConfigurationError(
+                "the calibration file has no board mount (a manual calibration): "
+                "run `pickplace calibrate` first"
+            )
         Y = np.asarray(saved.record["T_gripper_board"], dtype=float)
         target = CharucoTarget(cal.board)
         with open_camera(s, source, seed) as cam:
-            pose_list = generate_calibration_poses(poses, cal, saved.T_base_camera, Y, target.outline,
-                                                   np.random.default_rng(seed), cam.intrinsics)
+            pose_list = generate_calibration_poses(
+                poses,
+                cal,
+                saved.T_base_camera,
+                Y,
+                target.outline,
+                np.random.default_rng(seed),
+                cam.intrinsics,
+            )
             async with GrpcCalibrationRobot(s, speed) as robot:
                 report = await check_calibration(robot, cam, cal, saved.T_base_camera, Y, pose_list)
         console.print(("[green]" if report.ok else "[red]") + report.message)

@@ -114,23 +114,30 @@ def detect_cubes_and_obstacles(
         if n_full < params.min_cluster_points:
             continue
         cp = pts[sel]
-        colour = classify_color(color_rgb[rows[sel], cols[sel]].mean(axis=0), params.black_value_max,
-                                params.min_saturation)
+        colour = classify_color(
+            color_rgb[rows[sel], cols[sel]].mean(axis=0), params.black_value_max, params.min_saturation
+        )
         local = transform_points(T_table_cam, cp)
         (cx, cy), sides, angle = cv2.minAreaRect(local[:, :2].astype(np.float32))
         extent = float(max(sides))
         by_points = n_full >= rule.min_points
         by_extent = extent >= rule.min_extent_m
-        large = {"points": by_points, "extent": by_extent, "either": by_points or by_extent,
-                 "both": by_points and by_extent}[rule.require]
+        large = {
+            "points": by_points,
+            "extent": by_extent,
+            "either": by_points or by_extent,
+            "both": by_points and by_extent,
+        }[rule.require]
         if large and (rule.color == "any" or colour == rule.color):
             obstacles.append(_obstacle_box(cp, plane, colour, n_full, intr, T_base_camera, rule.margin_m))
             continue
         size = params.cube_size_m
         top = float(np.percentile(local[:, 2], 90))
         if extent > 1.6 * size or not 0.7 * size < top < 1.3 * size:
-            notes.append(f"{colour} cluster of {n_full} px, {extent * 1000:.0f} mm across and "
-                         f"{top * 1000:.0f} mm high: neither a cube nor the obstacle")
+            notes.append(
+                f"{colour} cluster of {n_full} px, {extent * 1000:.0f} mm across and "
+                f"{top * 1000:.0f} mm high: neither a cube nor the obstacle"
+            )
             continue
         cubes.append(_fit_cube(local, (cx, cy, np.deg2rad(angle)), size, colour, n_full, T_cam_table, intr))
     timings = {"cube_segmentation": (t1 - t0) * 1e3, "cube_pose": _ms(t1)}
@@ -158,8 +165,13 @@ def _box_sdf(q: Array, half: float) -> tuple[Array, Array]:
 
 
 def _fit_cube(
-    local: Array, init: tuple[float, float, float], size: float, colour: str, n_full: int,
-    T_cam_table: Array, intr: CameraIntrinsics,
+    local: Array,
+    init: tuple[float, float, float],
+    size: float,
+    colour: str,
+    n_full: int,
+    T_cam_table: Array,
+    intr: CameraIntrinsics,
 ) -> CubeDetection:
     """Cube of known size resting on the table (x, y, yaw) fitted to its visible surface points."""
     half = size / 2.0
@@ -180,21 +192,33 @@ def _fit_cube(
         q = cube_frame(x)
         g = _box_sdf(q, half)[1]
         c, s = np.cos(x[2]), np.sin(x[2])
-        return np.column_stack([
-            -c * g[:, 0] + s * g[:, 1],  # d/dcx
-            -s * g[:, 0] - c * g[:, 1],  # d/dcy
-            q[:, 1] * g[:, 0] - q[:, 0] * g[:, 1],  # d/dyaw
-        ])
+        return np.column_stack(
+            [
+                -c * g[:, 0] + s * g[:, 1],  # d/dcx
+                -s * g[:, 0] - c * g[:, 1],  # d/dcy
+                q[:, 1] * g[:, 0] - q[:, 0] * g[:, 1],  # d/dyaw
+            ]
+        )
 
-    fit = robust_least_squares(residuals, np.array(init, dtype=float), step=np.array([1e-5, 1e-5, 1e-4]),
-                               loss_scale=0.003, tol=np.array([2e-5, 2e-5, 2e-4]), jac=jacobian)
+    fit = robust_least_squares(
+        residuals,
+        np.array(init, dtype=float),
+        step=np.array([1e-5, 1e-5, 1e-4]),
+        loss_scale=0.003,
+        tol=np.array([2e-5, 2e-5, 2e-4]),
+        jac=jacobian,
+    )
     cx, cy, yaw = fit.x
     res = fit.residuals
     center_table = np.array([cx, cy, half])
-    R_table_cube = np.array([[np.cos(yaw), -np.sin(yaw), 0.0], [np.sin(yaw), np.cos(yaw), 0.0], [0.0, 0.0, 1.0]])
+    R_table_cube = np.array(
+        [[np.cos(yaw), -np.sin(yaw), 0.0], [np.sin(yaw), np.cos(yaw), 0.0], [0.0, 0.0, 1.0]]
+    )
     center_cam = T_cam_table[:3, :3] @ center_table + T_cam_table[:3, 3]
     return CubeDetection(
-        centroid_cam=center_cam, color_label=colour, n_points=n_full,
+        centroid_cam=center_cam,
+        color_label=colour,
+        n_points=n_full,
         rotation_cam=T_cam_table[:3, :3] @ R_table_cube,
         fit_rms_m=float(np.sqrt(np.mean(np.minimum(np.abs(res), 0.01) ** 2))),
         image_uv=project(center_cam[None], intr)[0],
@@ -202,8 +226,13 @@ def _fit_cube(
 
 
 def _obstacle_box(
-    cp: Array, plane: Plane, colour: str, n_full: int, intr: CameraIntrinsics,
-    T_base_camera: Array | None, margin: float,
+    cp: Array,
+    plane: Plane,
+    colour: str,
+    n_full: int,
+    intr: CameraIntrinsics,
+    T_base_camera: Array | None,
+    margin: float,
 ) -> ObstacleBox:
     solid = np.vstack([cp, plane.project(cp)])  # the box stands on the table
     lo, hi = solid.min(axis=0) - margin, solid.max(axis=0) + margin
@@ -214,8 +243,15 @@ def _obstacle_box(
         min_base, max_base = pb.min(axis=0) - margin, pb.max(axis=0) + margin
         # draw the base-frame box (the one the planner uses) when we have it
         corners_cam = transform_points(np.linalg.inv(T_base_camera), _box_corners(min_base, max_base))
-    return ObstacleBox(min_cam=lo, max_cam=hi, n_points=n_full, color_label=colour,
-                       corners_px=project(corners_cam, intr), min_base=min_base, max_base=max_base)
+    return ObstacleBox(
+        min_cam=lo,
+        max_cam=hi,
+        n_points=n_full,
+        color_label=colour,
+        corners_px=project(corners_cam, intr),
+        min_base=min_base,
+        max_base=max_base,
+    )
 
 
 def _box_corners(lo: Array, hi: Array) -> Array:

@@ -31,8 +31,8 @@ def scaled_stride(stride: int, intr: CameraIntrinsics) -> int:
 
 @lru_cache(maxsize=8)
 def _ray_grid(width: int, height: int, fx: float, fy: float, cx: float, cy: float) -> tuple[Array, Array]:
-    xs = ((np.arange(width, dtype=np.float32) - np.float32(cx)) / np.float32(fx))
-    ys = ((np.arange(height, dtype=np.float32) - np.float32(cy)) / np.float32(fy))
+    xs = (np.arange(width, dtype=np.float32) - np.float32(cx)) / np.float32(fx)
+    ys = (np.arange(height, dtype=np.float32) - np.float32(cy)) / np.float32(fy)
     xs.setflags(write=False)
     ys.setflags(write=False)
     return xs, ys
@@ -54,8 +54,12 @@ def pixel_rays(intr: CameraIntrinsics, rows: Array, cols: Array) -> Array:
 
 
 def backproject(
-    depth_m: Array, intr: CameraIntrinsics, stride: int = 1, mask: Array | None = None,
-    z_min: float = 0.0, z_max: float = np.inf,
+    depth_m: Array,
+    intr: CameraIntrinsics,
+    stride: int = 1,
+    mask: Array | None = None,
+    z_min: float = 0.0,
+    z_max: float = np.inf,
 ) -> tuple[Array, Array, Array]:
     """Valid depth pixels (optionally masked, strided) → (points (N,3) camera frame, rows, cols)."""
     d = depth_m[::stride, ::stride]
@@ -170,4 +174,9 @@ def fit_plane_ransac(
         normal, offset = -normal, -offset
     res = pts @ normal + offset
     inl = np.abs(res) < threshold_m
-    return Plane(normal=normal, d=offset, inlier_fraction=float(inl.mean()), rms_m=float(np.sqrt(np.mean(res[inl] ** 2))))
+    return Plane(
+        normal=normal,
+        d=offset,
+        inlier_fraction=float(inl.mean()),
+        rms_m=float(np.sqrt(np.mean(res[inl] ** 2))),
+    )

@@ -24,8 +24,15 @@ def from_vec3(v: vision_pb2.Vec3) -> Array:
 
 def pose(p: Array, R: Array) -> common_pb2.Pose:
     q = rotation_to_quaternion(R)
-    return common_pb2.Pose(x=float(p[0]), y=float(p[1]), z=float(p[2]), qx=float(q[0]), qy=float(q[1]),
-                           qz=float(q[2]), qw=float(q[3]))
+    return common_pb2.Pose(
+        x=float(p[0]),
+        y=float(p[1]),
+        z=float(p[2]),
+        qx=float(q[0]),
+        qy=float(q[1]),
+        qz=float(q[2]),
+        qw=float(q[3]),
+    )
 
 
 def frame_to_msg(frame: RGBDFrame) -> vision_pb2.RGBDFrame:
@@ -33,8 +40,9 @@ def frame_to_msg(frame: RGBDFrame) -> vision_pb2.RGBDFrame:
     i = f.intrinsics
     return vision_pb2.RGBDFrame(
         header=common_pb2.Header(stamp_ns=f.stamp_ns, frame_id=f.frame_id, seq=f.seq),
-        intrinsics=vision_pb2.CameraIntrinsics(width=i.width, height=i.height, fx=i.fx, fy=i.fy, cx=i.cx, cy=i.cy,
-                                               distortion=list(i.distortion)),
+        intrinsics=vision_pb2.CameraIntrinsics(
+            width=i.width, height=i.height, fx=i.fx, fy=i.fy, cx=i.cx, cy=i.cy, distortion=list(i.distortion)
+        ),
         color_rgb8=np.ascontiguousarray(f.color).tobytes(),
         depth_u16=np.ascontiguousarray(f.depth.astype("<u2")).tobytes(),
         depth_scale=f.depth_scale,
@@ -48,15 +56,24 @@ def msg_to_frame(msg: vision_pb2.RGBDFrame) -> RGBDFrame:
     if w <= 0 or h <= 0:
         raise InvalidFrameError(f"frame message has no image size ({w}x{h})")
     if len(msg.color_rgb8) != w * h * 3:
-        raise InvalidFrameError(f"colour payload is {len(msg.color_rgb8)} bytes, {w}x{h} RGB8 needs {w * h * 3}")
+        raise InvalidFrameError(
+            f"colour payload is {len(msg.color_rgb8)} bytes, {w}x{h} RGB8 needs {w * h * 3}"
+        )
     if len(msg.depth_u16) != w * h * 2:
-        raise InvalidFrameError(f"depth payload is {len(msg.depth_u16)} bytes, {w}x{h} uint16 needs {w * h * 2}")
-    intr = CameraIntrinsics(width=w, height=h, fx=i.fx, fy=i.fy, cx=i.cx, cy=i.cy, distortion=tuple(i.distortion))
+        raise InvalidFrameError(
+            f"depth payload is {len(msg.depth_u16)} bytes, {w}x{h} uint16 needs {w * h * 2}"
+        )
+    intr = CameraIntrinsics(
+        width=w, height=h, fx=i.fx, fy=i.fy, cx=i.cx, cy=i.cy, distortion=tuple(i.distortion)
+    )
     frame = RGBDFrame(
         color=np.frombuffer(msg.color_rgb8, np.uint8).reshape(h, w, 3),
         depth=np.frombuffer(msg.depth_u16, "<u2").reshape(h, w).astype(np.uint16),
-        intrinsics=intr, depth_scale=msg.depth_scale or 0.001, stamp_ns=msg.header.stamp_ns,
-        frame_id=msg.header.frame_id or "camera", seq=msg.header.seq,
+        intrinsics=intr,
+        depth_scale=msg.depth_scale or 0.001,
+        stamp_ns=msg.header.stamp_ns,
+        frame_id=msg.header.frame_id or "camera",
+        seq=msg.header.seq,
     )
     try:
         return frame.validate()
@@ -67,13 +84,20 @@ def msg_to_frame(msg: vision_pb2.RGBDFrame) -> RGBDFrame:
 def detections_msg(result: DetectionResult, frame_id: str = "camera") -> vision_pb2.DetectedObjects:
     msg = vision_pb2.DetectedObjects(
         header=common_pb2.Header(stamp_ns=result.stamp_ns, frame_id=frame_id, seq=result.seq),
-        notes=list(result.notes), rod_detected=result.rod_detected, calibrated=result.T_base_camera is not None,
+        notes=list(result.notes),
+        rod_detected=result.rod_detected,
+        calibrated=result.T_base_camera is not None,
     )
     msg.timings_ms.update({k: float(v) for k, v in result.timings_ms.items()})
     for r in result.rods:
         m = msg.rods.add(
-            center_camera=vec3(r.center_cam), axis_camera=vec3(r.axis_cam), pose_camera=pose(r.center_cam, r.rotation_cam),
-            length_m=r.length_m, diameter_m=r.diameter_m, confidence=r.confidence, method=r.method,
+            center_camera=vec3(r.center_cam),
+            axis_camera=vec3(r.axis_cam),
+            pose_camera=pose(r.center_cam, r.rotation_cam),
+            length_m=r.length_m,
+            diameter_m=r.diameter_m,
+            confidence=r.confidence,
+            method=r.method,
             n_depth_points=r.n_depth_points,
         )
         R_base = r.rotation_base
@@ -83,15 +107,22 @@ def detections_msg(result: DetectionResult, frame_id: str = "camera") -> vision_
             m.axis_base.CopyFrom(vec3(r.axis_base))
             m.pose_base.CopyFrom(pose(r.center_base, R_base))
     for c in result.cubes:
-        m = msg.cubes.add(centroid_camera=vec3(c.centroid_cam), pose_camera=pose(c.centroid_cam, c.rotation_cam),
-                          color_label=c.color_label, n_points=c.n_points)
+        m = msg.cubes.add(
+            centroid_camera=vec3(c.centroid_cam),
+            pose_camera=pose(c.centroid_cam, c.rotation_cam),
+            color_label=c.color_label,
+            n_points=c.n_points,
+        )
         if c.centroid_base is not None and c.rotation_base is not None:
             m.has_base = True
             m.centroid_base.CopyFrom(vec3(c.centroid_base))
             m.pose_base.CopyFrom(pose(c.centroid_base, c.rotation_base))
     for o in result.obstacles:
-        m = msg.obstacles.add(camera=vision_pb2.BoxBounds(min=vec3(o.min_cam), max=vec3(o.max_cam)),
-                              color_label=o.color_label, n_points=o.n_points)
+        m = msg.obstacles.add(
+            camera=vision_pb2.BoxBounds(min=vec3(o.min_cam), max=vec3(o.max_cam)),
+            color_label=o.color_label,
+            n_points=o.n_points,
+        )
         if o.min_base is not None and o.max_base is not None:
             m.has_base = True
             m.base.CopyFrom(vision_pb2.BoxBounds(min=vec3(o.min_base), max=vec3(o.max_base)))

@@ -11,7 +11,10 @@ from services.vision.results import DetectionResult
 Array = np.ndarray
 
 _LABEL_BGR = {
-    "red": (40, 40, 230), "green": (60, 200, 60), "blue": (230, 120, 40), "black": (200, 200, 200),
+    "red": (40, 40, 230),
+    "green": (60, 200, 60),
+    "blue": (230, 120, 40),
+    "black": (200, 200, 200),
     "unknown": (0, 200, 255),
 }
 _ROD_BGR = (0, 255, 255)
@@ -22,7 +25,9 @@ _BOX_EDGES = [(0, 1), (0, 2), (1, 3), (2, 3), (4, 5), (4, 6), (5, 7), (6, 7), (0
 def draw_detections(color_rgb: Array, result: DetectionResult) -> Array:
     """A BGR copy of the frame with rods (axis, ends, rank, confidence), cubes and obstacle boxes."""
     if color_rgb.ndim != 3 or color_rgb.shape[2] != 3 or color_rgb.dtype != np.uint8:
-        raise InvalidInputError(f"overlay needs an (H, W, 3) uint8 image, got {color_rgb.dtype} {color_rgb.shape}")
+        raise InvalidInputError(
+            f"overlay needs an (H, W, 3) uint8 image, got {color_rgb.dtype} {color_rgb.shape}"
+        )
     img = cv2.cvtColor(color_rgb, cv2.COLOR_RGB2BGR)
     for rank, rod in enumerate(result.rods, start=1):
         (u0, v0), (u1, v1) = _pt(rod.endpoints_px[0]), _pt(rod.endpoints_px[1])

@@ -90,11 +90,17 @@ class VisionPipeline:
         stride = scaled_stride(s.table.sample_stride, intr)
         cloud, _, _ = backproject(depth_m, intr, stride, None, s.cubes.min_depth_m, s.cubes.max_depth_m)
         if len(cloud) < 3:
-            raise VisionError(f"no depth between {s.cubes.min_depth_m} and {s.cubes.max_depth_m} m: the table "
-                              "must lie in that range (vision.cubes.min_depth_m/max_depth_m)")
+            raise VisionError(
+                f"no depth between {s.cubes.min_depth_m} and {s.cubes.max_depth_m} m: the table "
+                "must lie in that range (vision.cubes.min_depth_m/max_depth_m)"
+            )
         plane = fit_plane_ransac(
-            cloud, s.table.ransac_threshold_m, s.table.iterations, np.random.default_rng(self._seed),
-            s.table.max_ransac_points, s.table.min_inlier_fraction,
+            cloud,
+            s.table.ransac_threshold_m,
+            s.table.iterations,
+            np.random.default_rng(self._seed),
+            s.table.max_ransac_points,
+            s.table.min_inlier_fraction,
         )
         timings["plane"] = (time.perf_counter() - t0) * 1e3
 
@@ -104,7 +110,9 @@ class VisionPipeline:
             timings.update(rod_t)
             notes += rod_notes
             if not rods:
-                notes.insert(0, "rod not detected: no dark, elongated region of the rod's size above the table")
+                notes.insert(
+                    0, "rod not detected: no dark, elongated region of the rod's size above the table"
+                )
             if T is not None:
                 rods = [r.in_base(T) for r in rods]
 
@@ -112,15 +120,23 @@ class VisionPipeline:
         if s.detect_cubes:
             exclude = _rod_footprint(rods, frame, depth_m, plane) if rods else None
             cubes, obstacles, cube_notes, cube_t = detect_cubes_and_obstacles(
-                frame.color, depth_m, intr, plane, s.cubes, T, exclude)
+                frame.color, depth_m, intr, plane, s.cubes, T, exclude
+            )
             timings.update(cube_t)
             notes += cube_notes
             if not cubes:
                 notes.append("no cubes detected")
         timings["total"] = (time.perf_counter() - t_start) * 1e3
         return DetectionResult(
-            rods=tuple(rods), cubes=tuple(cubes), obstacles=tuple(obstacles), table=plane, timings_ms=timings,
-            notes=tuple(notes), T_base_camera=T, stamp_ns=frame.stamp_ns, seq=frame.seq,
+            rods=tuple(rods),
+            cubes=tuple(cubes),
+            obstacles=tuple(obstacles),
+            table=plane,
+            timings_ms=timings,
+            notes=tuple(notes),
+            T_base_camera=T,
+            stamp_ns=frame.stamp_ns,
+            seq=frame.seq,
         )
 
     def with_settings(self, settings: VisionSettings) -> VisionPipeline:

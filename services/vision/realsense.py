@@ -79,11 +79,19 @@ class RealSenseCamera:
             profile = pipeline.start(cfg)
         except RuntimeError as exc:
             raise CameraConnectionError(
-                f"RealSense {self.serial} cannot stream {s.width}x{s.height}@{s.fps}: {exc}") from exc
+                f"RealSense {self.serial} cannot stream {s.width}x{s.height}@{s.fps}: {exc}"
+            ) from exc
         self._depth_scale = float(profile.get_device().first_depth_sensor().get_depth_scale())
         ci = profile.get_stream(rs.stream.color).as_video_stream_profile().get_intrinsics()
-        self._intr = CameraIntrinsics(width=ci.width, height=ci.height, fx=ci.fx, fy=ci.fy, cx=ci.ppx, cy=ci.ppy,
-                                      distortion=tuple(float(c) for c in ci.coeffs)).validate()
+        self._intr = CameraIntrinsics(
+            width=ci.width,
+            height=ci.height,
+            fx=ci.fx,
+            fy=ci.fy,
+            cx=ci.ppx,
+            cy=ci.ppy,
+            distortion=tuple(float(c) for c in ci.coeffs),
+        ).validate()
         self._align = rs.align(rs.stream.color)
         self._pipeline = pipeline
         self._rs = rs
@@ -100,16 +108,22 @@ class RealSenseCamera:
         try:
             frames = self._pipeline.wait_for_frames(FRAME_TIMEOUT_MS)
         except RuntimeError as exc:
-            raise CameraConnectionError(f"RealSense {self.serial}: no frame within {FRAME_TIMEOUT_MS} ms: {exc}") from exc
+            raise CameraConnectionError(
+                f"RealSense {self.serial}: no frame within {FRAME_TIMEOUT_MS} ms: {exc}"
+            ) from exc
         aligned = self._align.process(frames)
         color, depth = aligned.get_color_frame(), aligned.get_depth_frame()
         if not color or not depth:
             raise CameraConnectionError(f"RealSense {self.serial}: incomplete frame set")
         self._seq += 1
         return RGBDFrame(
-            color=np.asanyarray(color.get_data()).copy(), depth=np.asanyarray(depth.get_data()).copy(),
-            intrinsics=self._intr, depth_scale=self._depth_scale, stamp_ns=time.time_ns(),
-            frame_id="camera_color_optical_frame", seq=self._seq,
+            color=np.asanyarray(color.get_data()).copy(),
+            depth=np.asanyarray(depth.get_data()).copy(),
+            intrinsics=self._intr,
+            depth_scale=self._depth_scale,
+            stamp_ns=time.time_ns(),
+            frame_id="camera_color_optical_frame",
+            seq=self._seq,
         )
 
     def close(self) -> None:

@@ -28,10 +28,22 @@ _INDEX = re.compile(r"^(color|depth)_(\d+)\.png$")
 
 def write_intrinsics(directory: Path, intr: CameraIntrinsics, depth_scale: float) -> Path:
     path = directory / "intrinsics.json"
-    path.write_text(json.dumps({
-        "width": intr.width, "height": intr.height, "fx": intr.fx, "fy": intr.fy, "cx": intr.cx, "cy": intr.cy,
-        "distortion": list(intr.distortion), "depth_scale": depth_scale, "model": "pinhole",
-    }, indent=2))
+    path.write_text(
+        json.dumps(
+            {
+                "width": intr.width,
+                "height": intr.height,
+                "fx": intr.fx,
+                "fy": intr.fy,
+                "cx": intr.cx,
+                "cy": intr.cy,
+                "distortion": list(intr.distortion),
+                "depth_scale": depth_scale,
+                "model": "pinhole",
+            },
+            indent=2,
+        )
+    )
     return path
 
 
@@ -40,8 +52,13 @@ def read_intrinsics(directory: Path) -> tuple[CameraIntrinsics, float]:
     try:
         raw = json.loads(path.read_text())
         intr = CameraIntrinsics(
-            width=int(raw["width"]), height=int(raw["height"]), fx=float(raw["fx"]), fy=float(raw["fy"]),
-            cx=float(raw["cx"]), cy=float(raw["cy"]), distortion=tuple(float(v) for v in raw.get("distortion", ())),
+            width=int(raw["width"]),
+            height=int(raw["height"]),
+            fx=float(raw["fx"]),
+            fy=float(raw["fy"]),
+            cx=float(raw["cx"]),
+            cy=float(raw["cy"]),
+            distortion=tuple(float(v) for v in raw.get("distortion", ())),
         )
         scale = float(raw.get("depth_scale", 0.001))
     except FileNotFoundError as exc:
@@ -66,7 +83,9 @@ class ReplayCamera:
                 pairs.setdefault(int(m.group(2)), {})[m.group(1)] = p
         self._files = [(v["color"], v["depth"]) for k, v in sorted(pairs.items()) if len(v) == 2]
         if not self._files:
-            raise CameraConnectionError(f"replay directory {self.directory} has no color_N.png/depth_N.png pairs")
+            raise CameraConnectionError(
+                f"replay directory {self.directory} has no color_N.png/depth_N.png pairs"
+            )
         self.loop = loop
         self._next = 0
         self._seq = 0
@@ -86,7 +105,9 @@ class ReplayCamera:
             raise CameraConnectionError("replay camera is closed")
         if self._next >= len(self._files):
             if not self.loop:
-                raise CameraConnectionError(f"end of the recording in {self.directory} ({len(self._files)} frames)")
+                raise CameraConnectionError(
+                    f"end of the recording in {self.directory} ({len(self._files)} frames)"
+                )
             self._next = 0
         color_path, depth_path = self._files[self._next]
         self._next += 1
@@ -97,9 +118,15 @@ class ReplayCamera:
         if depth.dtype != np.uint16:
             raise CameraConnectionError(f"{depth_path.name} must be a 16-bit PNG, got {depth.dtype}")
         self._seq += 1
-        return RGBDFrame(color=cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), depth=depth, intrinsics=self._intr,
-                         depth_scale=self._depth_scale, stamp_ns=time.time_ns(), frame_id="camera",
-                         seq=self._seq).validate()
+        return RGBDFrame(
+            color=cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB),
+            depth=depth,
+            intrinsics=self._intr,
+            depth_scale=self._depth_scale,
+            stamp_ns=time.time_ns(),
+            frame_id="camera",
+            seq=self._seq,
+        ).validate()
 
     def close(self) -> None:
         self._closed = True
@@ -132,7 +159,9 @@ def record_frames(
         depth = np.asarray(frame.depth)
         if depth.dtype != np.uint16:
             raise InvalidInputError(f"recording needs uint16 depth, got {depth.dtype}")
-        ok_c = cv2.imwrite(str(out / f"color_{i:0{width}d}.png"), cv2.cvtColor(frame.color, cv2.COLOR_RGB2BGR))
+        ok_c = cv2.imwrite(
+            str(out / f"color_{i:0{width}d}.png"), cv2.cvtColor(frame.color, cv2.COLOR_RGB2BGR)
+        )
         ok_d = cv2.imwrite(str(out / f"depth_{i:0{width}d}.png"), depth)
         if not (ok_c and ok_d):
             raise InvalidInputError(f"could not write frame {i} into {out}")

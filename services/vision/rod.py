@@ -70,8 +70,9 @@ def heights_at(depth_m: Array, intr: CameraIntrinsics, plane: Plane, rows: Array
     return np.where(z > 0, h, np.nan)
 
 
-def table_is_dark(color_rgb: Array, depth_m: Array, intr: CameraIntrinsics, plane: Plane, value_max: int,
-                  tol_m: float) -> bool:
+def table_is_dark(
+    color_rgb: Array, depth_m: Array, intr: CameraIntrinsics, plane: Plane, value_max: int, tol_m: float
+) -> bool:
     """Is the table surface itself dark (a black mat)? Median value of on-table pixels, strided."""
     rows, cols = np.mgrid[4 : intr.height : 8, 4 : intr.width : 8]
     rows, cols = rows.ravel(), cols.ravel()
@@ -133,16 +134,20 @@ def detect_rods(
         shape = _region_shape(rows, cols)
         if shape is None or shape[2] < params.min_aspect_ratio:
             if shape is not None and shape[2] >= 1.8:
-                notes.append(f"dark region at px ({x0 + w // 2}, {y0 + h // 2}) not elongated enough "
-                             f"(aspect {shape[2]:.1f} < {params.min_aspect_ratio})")
+                notes.append(
+                    f"dark region at px ({x0 + w // 2}, {y0 + h // 2}) not elongated enough "
+                    f"(aspect {shape[2]:.1f} < {params.min_aspect_ratio})"
+                )
             continue
         comp_h = heights_at(depth_m, intr, plane, rows, cols)
         comp_valid = np.isfinite(comp_h)
         if np.any(comp_valid):
             above_frac = float(np.mean((comp_h[comp_valid] > thr) & (comp_h[comp_valid] < h_max)))
             if above_frac < 0.3:
-                notes.append(f"dark elongated region at px ({x0 + w // 2}, {y0 + h // 2}) lies flat on the "
-                             f"table ({above_frac:.0%} of it above), not a rod")
+                notes.append(
+                    f"dark elongated region at px ({x0 + w // 2}, {y0 + h // 2}) lies flat on the "
+                    f"table ({above_frac:.0%} of it above), not a rod"
+                )
                 continue
         tp = time.perf_counter()
         det, why = _fit_rod(comp, (oy, ox), rows, cols, shape, depth_m, intr, plane, params, r)
@@ -253,7 +258,9 @@ def _ray_hits(rays: Array, axis: _Axis, r: float) -> tuple[Array, Array, Array]:
     return s_in, s_out, np.where(hit, 0.0, sq)
 
 
-def _surface_fit(points: Array, init: _Axis, plane: Plane, r: float, loss_scale: float) -> tuple[_Axis, Array]:
+def _surface_fit(
+    points: Array, init: _Axis, plane: Plane, r: float, loss_scale: float
+) -> tuple[_Axis, Array]:
     """Cylinder of radius r resting on the table, fitted to the measured depths: (axis, residuals).
 
     The residual is measured depth minus the depth where the pixel's ray meets the model surface —
@@ -276,8 +283,9 @@ def _surface_fit(points: Array, init: _Axis, plane: Plane, r: float, loss_scale:
         s_in, _, miss = _ray_hits(rays, axis(x), r)
         return z - s_in + miss
 
-    fit = robust_least_squares(residuals, np.zeros(2), step=np.array([1e-5, 1e-6]), loss_scale=loss_scale,
-                               tol=np.array([1e-5, 1e-6]))
+    fit = robust_least_squares(
+        residuals, np.zeros(2), step=np.array([1e-5, 1e-6]), loss_scale=loss_scale, tol=np.array([1e-5, 1e-6])
+    )
     return axis(fit.x), fit.residuals
 
 
@@ -297,8 +305,16 @@ def _chord_ends(rays: Array, axis: _Axis, r: float) -> tuple[float, float]:
 
 
 def _fit_rod(
-    comp: Array, offset: tuple[int, int], rows: Array, cols: Array, shape: tuple[Array, Array, float, Array],
-    depth_m: Array, intr: CameraIntrinsics, plane: Plane, params: RodDetectionSettings, r: float,
+    comp: Array,
+    offset: tuple[int, int],
+    rows: Array,
+    cols: Array,
+    shape: tuple[Array, Array, float, Array],
+    depth_m: Array,
+    intr: CameraIntrinsics,
+    plane: Plane,
+    params: RodDetectionSettings,
+    r: float,
 ) -> tuple[RodDetection | None, str]:
     where = f"px ({shape[3][0]:.0f}, {shape[3][1]:.0f})"
     planes = _edge_planes(comp, offset, shape, intr)
@@ -344,12 +360,18 @@ def _fit_rod(
 
     L0, D0 = params.length_m, params.diameter_m
     if abs(length / L0 - 1.0) > params.length_tolerance:
-        return None, (f"dark elongated region at {where}: length {length * 1000:.0f} mm is not the "
-                      f"rod's {L0 * 1000:.0f} mm ± {params.length_tolerance:.0%}")
+        return None, (
+            f"dark elongated region at {where}: length {length * 1000:.0f} mm is not the "
+            f"rod's {L0 * 1000:.0f} mm ± {params.length_tolerance:.0%}"
+        )
     if abs(diameter / D0 - 1.0) > params.diameter_tolerance:
-        return None, (f"dark elongated region at {where}: diameter {diameter * 1000:.1f} mm is not the "
-                      f"rod's {D0 * 1000:.1f} mm ± {params.diameter_tolerance:.0%}")
-    score = np.exp(-0.5 * ((length - L0) / (0.1 * L0)) ** 2) * np.exp(-0.5 * ((diameter - D0) / (0.25 * D0)) ** 2)
+        return None, (
+            f"dark elongated region at {where}: diameter {diameter * 1000:.1f} mm is not the "
+            f"rod's {D0 * 1000:.1f} mm ± {params.diameter_tolerance:.0%}"
+        )
+    score = np.exp(-0.5 * ((length - L0) / (0.1 * L0)) ** 2) * np.exp(
+        -0.5 * ((diameter - D0) / (0.25 * D0)) ** 2
+    )
     if residuals is not None:
         score *= float(np.mean(np.abs(residuals) < 2.5 * params.fit_loss_scale_m))
         if sil is not None:  # disagreement between outline and surface lowers trust
@@ -358,9 +380,16 @@ def _fit_rod(
         score *= 0.6  # outline only
     ends = np.array([axis.point + lo * u, axis.point + hi * u])
     det = RodDetection(
-        center_cam=center, axis_cam=u, up_cam=plane.normal.copy(), length_m=float(length),
-        diameter_m=float(diameter), confidence=float(np.clip(score, 0.0, 1.0)), method=method,
-        n_depth_points=n_depth, n_pixels=len(rows), endpoints_px=project(ends, intr),
+        center_cam=center,
+        axis_cam=u,
+        up_cam=plane.normal.copy(),
+        length_m=float(length),
+        diameter_m=float(diameter),
+        confidence=float(np.clip(score, 0.0, 1.0)),
+        method=method,
+        n_depth_points=n_depth,
+        n_pixels=len(rows),
+        endpoints_px=project(ends, intr),
     )
     return det, ""
 

@@ -62,7 +62,9 @@ def load_T_base_camera(cal: CalibrationSettings) -> tuple[Array | None, str]:
     if path.exists():
         return read_calibration(path).T_base_camera, f"calibration file {path}"
     if cal.manual_translation_m is not None and cal.manual_rpy_deg is not None:
-        return manual_T_base_camera(cal.manual_translation_m, rpy_deg=cal.manual_rpy_deg), "manual pose in settings"
+        return manual_T_base_camera(
+            cal.manual_translation_m, rpy_deg=cal.manual_rpy_deg
+        ), "manual pose in settings"
     return None, "none (camera-frame results only)"
 
 
@@ -74,7 +76,9 @@ def make_camera(settings: CameraSourceSettings) -> Camera | None:
         return RealSenseCamera.open(settings)
     if settings.source == "replay":
         if not settings.replay_dir:
-            raise ConfigurationError("vision.camera.source is 'replay' but vision.camera.replay_dir is not set")
+            raise ConfigurationError(
+                "vision.camera.source is 'replay' but vision.camera.replay_dir is not set"
+            )
         from services.vision.replay import ReplayCamera
 
         return ReplayCamera(settings.replay_dir, loop=settings.replay_loop)
@@ -146,7 +150,9 @@ class VisionService:
         if self.camera is None and self.bus is not None:
             loop = asyncio.get_running_loop()
             self._subscription = self.bus.subscribe_callback(
-                self.keys.camera_frames, lambda _k, payload: loop.call_soon_threadsafe(self._on_bus_frame, payload))
+                self.keys.camera_frames,
+                lambda _k, payload: loop.call_soon_threadsafe(self._on_bus_frame, payload),
+            )
         self.server = grpc_util.create_server()
         vision_pb2_grpc.add_VisionServicer_to_server(VisionServicer(self), self.server)
         self.grpc_port = grpc_util.bind(self.server, self.settings.grpc.host, self.grpc_port)
@@ -155,8 +161,13 @@ class VisionService:
             self._loop_task = asyncio.create_task(self._run(), name="vision.publish")
         if self.bus is not None:
             self.live = LiveConfig(self.bus, self.settings, self._on_config).start()
-        log.info("vision serving on %s:%d; camera %s; calibration: %s", self.settings.grpc.host, self.grpc_port,
-                 type(self.camera).__name__ if self.camera else "Zenoh frame stream", self.calibration_source)
+        log.info(
+            "vision serving on %s:%d; camera %s; calibration: %s",
+            self.settings.grpc.host,
+            self.grpc_port,
+            type(self.camera).__name__ if self.camera else "Zenoh frame stream",
+            self.calibration_source,
+        )
         return self.grpc_port
 
     async def _on_config(self, new: Settings, changed: list[str]) -> None:
@@ -212,7 +223,8 @@ class VisionService:
                 await self._bus_frame_event.wait()
         except TimeoutError as exc:
             raise CameraConnectionError(
-                f"no camera frame on {self.keys.camera_frames} within {FRAME_WAIT_S} s") from exc
+                f"no camera frame on {self.keys.camera_frames} within {FRAME_WAIT_S} s"
+            ) from exc
         assert self._bus_frame is not None
         return self._bus_frame, time.perf_counter() - t0
 
@@ -224,14 +236,16 @@ class VisionService:
             frame, capture_s = await self._next_frame()
         async with self._detect_lock:  # one CPU-bound detection at a time, off the event loop
             result = await asyncio.to_thread(self.pipeline.detect, frame, self.T_base_camera)
-            jpeg = await asyncio.to_thread(overlay_jpeg, frame.color, result,
-                                           self.settings.vision.debug_jpeg_quality)
+            jpeg = await asyncio.to_thread(
+                overlay_jpeg, frame.color, result, self.settings.vision.debug_jpeg_quality
+            )
         result = replace_timings(result, capture=capture_s * 1e3)
         self._observe(result)
         self.latest_result = result
         self.latest_jpeg = jpeg
-        self.latest_header = common_pb2.Header(stamp_ns=frame.stamp_ns or time.time_ns(), frame_id=frame.frame_id,
-                                               seq=frame.seq)
+        self.latest_header = common_pb2.Header(
+            stamp_ns=frame.stamp_ns or time.time_ns(), frame_id=frame.frame_id, seq=frame.seq
+        )
         self._publish(result, frame, jpeg)
         return result, frame
 
@@ -239,7 +253,9 @@ class VisionService:
         t = result.timings_ms
         stages = {
             "capture": t.get("capture", 0.0),
-            "segmentation": t.get("plane", 0.0) + t.get("rod_segmentation", 0.0) + t.get("cube_segmentation", 0.0),
+            "segmentation": t.get("plane", 0.0)
+            + t.get("rod_segmentation", 0.0)
+            + t.get("cube_segmentation", 0.0),
             "pose": t.get("rod_pose", 0.0) + t.get("cube_pose", 0.0),
             "total": t.get("total", 0.0) + t.get("capture", 0.0),
         }
@@ -251,7 +267,9 @@ class VisionService:
             return
         try:
             self.bus.publish(self.keys.detected_objects, detections_msg(result, frame.frame_id))
-            self.bus.publish(self.keys.vision_debug_image, vision_pb2.DebugImage(header=self.latest_header, jpeg=jpeg))
+            self.bus.publish(
+                self.keys.vision_debug_image, vision_pb2.DebugImage(header=self.latest_header, jpeg=jpeg)
+            )
             self.published += 1
         except Exception as exc:  # the bus must never break detection
             log.warning("zenoh publish failed: %s", exc)
@@ -302,7 +320,9 @@ class BusCamera:
     def capture(self, fresh: bool = True) -> RGBDFrame:
         with self._cond:
             ok = self._cond.wait_for(
-                lambda: self._frame is not None and (not fresh or id(self._frame) != self._taken), self._timeout_s)
+                lambda: self._frame is not None and (not fresh or id(self._frame) != self._taken),
+                self._timeout_s,
+            )
             if not ok or self._frame is None:
                 raise CameraConnectionError(f"no camera frame on {self._key} within {self._timeout_s} s")
             self._taken = id(self._frame)
@@ -313,7 +333,9 @@ class BusCamera:
             self._sub.undeclare()
 
 
-async def publish_camera_frames(camera: Camera, bus: Bus, key: str, rate_hz: float, stop: asyncio.Event) -> int:
+async def publish_camera_frames(
+    camera: Camera, bus: Bus, key: str, rate_hz: float, stop: asyncio.Event
+) -> int:
     """Stream a camera's frames onto Zenoh (for ``vision.camera.source: bus`` consumers); returns the count."""
     period = 1.0 / rate_hz
     n = 0

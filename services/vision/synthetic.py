@@ -46,9 +46,7 @@ def d435_intrinsics(width: int = 640, height: int = 480) -> CameraIntrinsics:
     return CameraIntrinsics(width=width, height=height, fx=f, fy=f, cx=width / 2.0, cy=height / 2.0)
 
 
-def look_at_camera(
-    target: Array, distance_m: float, pitch_deg: float, azimuth_deg: float = 0.0
-) -> Array:
+def look_at_camera(target: Array, distance_m: float, pitch_deg: float, azimuth_deg: float = 0.0) -> Array:
     """T_base_camera of a camera ``distance_m`` from ``target``, pitched down, optical axis through it.
 
     ``azimuth_deg`` is the horizontal direction from the target to the camera (0 = along +x).
@@ -158,15 +156,23 @@ def _camera_rays(intr: CameraIntrinsics) -> Array:
     return rays
 
 
-def _roi(corners_base: Array, T_camera_base: Array, intr: CameraIntrinsics, pad: int = 3) -> tuple[slice, slice]:
+def _roi(
+    corners_base: Array, T_camera_base: Array, intr: CameraIntrinsics, pad: int = 3
+) -> tuple[slice, slice]:
     """Image rectangle that contains the projection of these corners (whole image if any is behind)."""
     pc = (T_camera_base[:3, :3] @ corners_base.T).T + T_camera_base[:3, 3]
     if np.any(pc[:, 2] <= 1e-3):
         return slice(0, intr.height), slice(0, intr.width)
     u = intr.fx * pc[:, 0] / pc[:, 2] + intr.cx
     v = intr.fy * pc[:, 1] / pc[:, 2] + intr.cy
-    u0, u1 = int(np.clip(np.floor(u.min()) - pad, 0, intr.width)), int(np.clip(np.ceil(u.max()) + pad, 0, intr.width))
-    v0, v1 = int(np.clip(np.floor(v.min()) - pad, 0, intr.height)), int(np.clip(np.ceil(v.max()) + pad, 0, intr.height))
+    u0, u1 = (
+        int(np.clip(np.floor(u.min()) - pad, 0, intr.width)),
+        int(np.clip(np.ceil(u.max()) + pad, 0, intr.width)),
+    )
+    v0, v1 = (
+        int(np.clip(np.floor(v.min()) - pad, 0, intr.height)),
+        int(np.clip(np.ceil(v.max()) + pad, 0, intr.height)),
+    )
     return slice(v0, v1), slice(u0, u1)
 
 
@@ -186,7 +192,9 @@ def _hit_cylinder(o: Array, d: Array, length: float, r: float) -> tuple[Array, A
     side = ok & (ts > 0) & (np.abs(x_side) <= half)
     t = np.where(side, ts, t)
     p_side = o + ts[..., None] * d
-    normal = np.where(side[..., None], np.stack([np.zeros_like(ts), p_side[..., 1], p_side[..., 2]], -1) / r, normal)
+    normal = np.where(
+        side[..., None], np.stack([np.zeros_like(ts), p_side[..., 1], p_side[..., 2]], -1) / r, normal
+    )
     for sign in (-1.0, 1.0):
         with np.errstate(invalid="ignore", divide="ignore"):
             tc = (sign * half - o[0]) / d[..., 0]
@@ -246,8 +254,10 @@ def render_scene(scene: SyntheticScene, noise: NoiseModel | None = None, seed: i
     p_table = origin + t_table[..., None] * rays
     on_table = (
         (t_table > 0)
-        & (p_table[..., 0] >= scene.table_min[0]) & (p_table[..., 0] <= scene.table_max[0])
-        & (p_table[..., 1] >= scene.table_min[1]) & (p_table[..., 1] <= scene.table_max[1])
+        & (p_table[..., 0] >= scene.table_min[0])
+        & (p_table[..., 0] <= scene.table_max[0])
+        & (p_table[..., 1] >= scene.table_min[1])
+        & (p_table[..., 1] <= scene.table_max[1])
     )
     depth = np.where(on_table, t_table, depth)
     labels[on_table] = LABEL_TABLE
@@ -256,7 +266,9 @@ def render_scene(scene: SyntheticScene, noise: NoiseModel | None = None, seed: i
 
     visible_alone: dict[int, int] = {}
     rod_ids = []
-    objects: list[tuple[int, str, object]] = [(LABEL_FIRST_OBJECT + i, "rod", r) for i, r in enumerate(scene.rods)]
+    objects: list[tuple[int, str, object]] = [
+        (LABEL_FIRST_OBJECT + i, "rod", r) for i, r in enumerate(scene.rods)
+    ]
     objects += [(LABEL_FIRST_OBJECT + len(scene.rods) + i, "box", b) for i, b in enumerate(scene.boxes)]
     for obj_id, kind, spec in objects:
         if kind == "rod":
@@ -311,7 +323,9 @@ def render_scene(scene: SyntheticScene, noise: NoiseModel | None = None, seed: i
         depth_m = _degrade_depth(depth_m, valid, is_rod, noise, rng)
     depth_mm = np.clip(np.rint(depth_m * 1000.0), 0, 65535).astype(np.uint16)
     frame = RGBDFrame(color=color, depth=depth_mm, intrinsics=intr, depth_scale=0.001, frame_id="camera")
-    return RenderedScene(frame=frame, scene=scene, labels=labels, depth_true_m=depth_true, visible_fraction=visible)
+    return RenderedScene(
+        frame=frame, scene=scene, labels=labels, depth_true_m=depth_true, visible_fraction=visible
+    )
 
 
 def _smooth_field(rng: np.random.Generator, shape: tuple[int, int], cell_px: int) -> Array:
@@ -341,7 +355,11 @@ def _degrade_depth(
     # Holes on the black metal: blobs plus scattered pixels, about rod_hole_fraction of the rod.
     if noise.rod_hole_fraction > 0 and np.any(is_rod):
         blob = _smooth_field(rng, shape, 6)
-        thresh = np.quantile(blob[is_rod], 1.0 - 0.8 * noise.rod_hole_fraction) if noise.rod_hole_fraction < 1 else -np.inf
+        thresh = (
+            np.quantile(blob[is_rod], 1.0 - 0.8 * noise.rod_hole_fraction)
+            if noise.rod_hole_fraction < 1
+            else -np.inf
+        )
         holes = is_rod & ((blob >= thresh) | (rng.random(shape) < 0.2 * noise.rod_hole_fraction))
         out = np.where(holes, 0.0, out)
     out = np.where(rng.random(shape) < noise.dropout, 0.0, out)
@@ -357,7 +375,10 @@ class SceneRanges:
     target_xy: tuple[tuple[float, float], tuple[float, float]] = ((0.35, 0.50), (-0.10, 0.10))
     cube_size_m: float = 0.05
     obstacle_size_m: tuple[tuple[float, float], tuple[float, float], tuple[float, float]] = (
-        (0.12, 0.20), (0.10, 0.16), (0.06, 0.12))
+        (0.12, 0.20),
+        (0.10, 0.16),
+        (0.06, 0.12),
+    )
     margin_px: int = 12
     min_visible_fraction: float = 0.9
 
@@ -387,8 +408,9 @@ def random_scene(
         target = np.array([rng.uniform(*ranges.target_xy[0]), rng.uniform(*ranges.target_xy[1]), 0.0])
         dist = rng.uniform(*ranges.distance_m)
         T = look_at_camera(target, dist, rng.uniform(*ranges.pitch_deg), rng.uniform(*ranges.azimuth_deg))
-        scene = _place_objects(rng, T, intr, target, dist, n_rods, cube_colors, obstacle, ranges,
-                               rod_length_m, rod_radius_m)
+        scene = _place_objects(
+            rng, T, intr, target, dist, n_rods, cube_colors, obstacle, ranges, rod_length_m, rod_radius_m
+        )
         if scene is None:
             continue
         scene = replace(scene, table_rgb=DARK_MAT_RGB if dark_mat else LIGHT_TABLE_RGB)
@@ -401,9 +423,17 @@ def random_scene(
 
 
 def _place_objects(
-    rng: np.random.Generator, T_base_camera: Array, intr: CameraIntrinsics, target: Array, dist: float,
-    n_rods: int, cube_colors: tuple[str, ...], obstacle: bool, ranges: SceneRanges,
-    rod_length: float, rod_radius: float,
+    rng: np.random.Generator,
+    T_base_camera: Array,
+    intr: CameraIntrinsics,
+    target: Array,
+    dist: float,
+    n_rods: int,
+    cube_colors: tuple[str, ...],
+    obstacle: bool,
+    ranges: SceneRanges,
+    rod_length: float,
+    rod_radius: float,
 ) -> SyntheticScene | None:
     T_camera_base = np.linalg.inv(T_base_camera)
     spread = 0.30 * dist  # the visible table patch grows with distance
@@ -445,6 +475,7 @@ def _place_objects(
         boxes.append(spec)  # type: ignore[arg-type]
         obstacle_idx = (0,)
     for _ in range(n_rods):
+
         def make_rod(xy: Array) -> tuple[RodSpec, Array]:
             r = RodSpec((xy[0], xy[1], rod_radius), rng.uniform(-np.pi, np.pi), rod_length, rod_radius)
             ends = np.array([r.center + s * r.axis * rod_length / 2 for s in (-1, 1)])
@@ -457,6 +488,7 @@ def _place_objects(
         rods.append(spec)  # type: ignore[arg-type]
     s = ranges.cube_size_m
     for colour in cube_colors:
+
         def make_cube(xy: Array, colour: str = colour) -> tuple[BoxSpec, Array]:
             b = BoxSpec((xy[0], xy[1], s / 2), (s, s, s), rng.uniform(-np.pi, np.pi), colour)
             return b, b.corners()
@@ -465,8 +497,13 @@ def _place_objects(
         if not spec:
             return None
         boxes.append(spec)  # type: ignore[arg-type]
-    return SyntheticScene(T_base_camera=T_base_camera, intrinsics=intr, rods=tuple(rods), boxes=tuple(boxes),
-                          obstacle_indices=obstacle_idx)
+    return SyntheticScene(
+        T_base_camera=T_base_camera,
+        intrinsics=intr,
+        rods=tuple(rods),
+        boxes=tuple(boxes),
+        obstacle_indices=obstacle_idx,
+    )
 
 
 # --- calibration board views --------------------------------------------------------------------
@@ -494,7 +531,9 @@ def render_planar_target(
     H = H @ np.array([[1, 0, 0.5], [0, 1, 0.5], [0, 0, 1.0]])
     # Render at 3x and area-average down: anti-aliased edges like a real lens, not jagged ones.
     ss = 3
-    S = np.array([[ss, 0, (ss - 1) / 2], [0, ss, (ss - 1) / 2], [0, 0, 1.0]])  # output px centre → fine px centre
+    S = np.array(
+        [[ss, 0, (ss - 1) / 2], [0, ss, (ss - 1) / 2], [0, 0, 1.0]]
+    )  # output px centre → fine px centre
     H_fine = S @ H
     white = np.full_like(board_image, 255)
     size = (intrinsics.width * ss, intrinsics.height * ss)

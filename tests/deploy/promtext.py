@@ -37,8 +37,11 @@ def exposition_names(text: str) -> set[str]:
 
 
 def exposition_samples(text: str, name: str) -> list[float]:
-    return [float(line.rsplit(" ", 1)[1]) for line in text.splitlines()
-            if line.startswith(name + "{") or line.startswith(name + " ")]
+    return [
+        float(line.rsplit(" ", 1)[1])
+        for line in text.splitlines()
+        if line.startswith(name + "{") or line.startswith(name + " ")
+    ]
 
 
 def dashboards() -> dict[str, dict[str, Any]]:

@@ -40,10 +40,12 @@ K8S_DIR = REPO / "deploy" / "k8s"
 
 def interpolate(value: str) -> str:
     """Compose's ${VAR:-default} / ${VAR:?error} / ${VAR} with a stand-in for the .env secrets."""
+
     def sub(m: re.Match[str]) -> str:
         if m.group(0).startswith("${" + m.group(1) + ":-"):
             return m.group(2)
         return "x" * 24  # a secret from .env
+
     return VAR.sub(sub, str(value))
 
 
@@ -112,7 +114,9 @@ def test_every_compose_command_exists_in_the_cli(name):
 
         assert params["service"] in SERVE
     if name in SERVICES:
-        assert tuple(args) == service_args(name), "compose and `pickplace up --processes` run different commands"
+        assert tuple(args) == service_args(name), (
+            "compose and `pickplace up --processes` run different commands"
+        )
 
 
 def test_an_unknown_command_is_caught_by_the_resolver():
@@ -138,30 +142,52 @@ def test_every_compose_variable_is_read_by_the_settings_and_valid(name, monkeypa
 
 def test_the_settings_field_check_rejects_a_misspelt_variable():
     assert settings_field("PICKPLACE_GRPC__ROBOT_PORT") and settings_field("PICKPLACE_PROFILE")
-    assert not settings_field("PICKPLACE_GRPC__ROBOT_PROT") and not settings_field("PICKPLACE_GRPC__ROBOT_PORT__X")
+    assert not settings_field("PICKPLACE_GRPC__ROBOT_PROT") and not settings_field(
+        "PICKPLACE_GRPC__ROBOT_PORT__X"
+    )
 
 
 def test_compose_and_the_local_launcher_use_the_same_variable_names():
     s = load_settings("sim")
-    specs = {sp.name: sp for sp in topology(s, LocalPorts.from_settings(s), api_token="t" * 20,
-                                            metrics_root=Path("/tmp/m"), log_dir=Path("/tmp/l"))}
+    specs = {
+        sp.name: sp
+        for sp in topology(
+            s,
+            LocalPorts.from_settings(s),
+            api_token="t" * 20,
+            metrics_root=Path("/tmp/m"),
+            log_dir=Path("/tmp/l"),
+        )
+    }
     for name in SERVICES:
         compose_names = set(CSERVICES[name]["environment"])
         local_names = set(specs[name].env)
         assert local_names - compose_names <= LOCAL_ONLY_ENV, (name, local_names - compose_names)
-        assert compose_names - local_names <= CONTAINER_ONLY_ENV | {MULTIPROC_ENV}, (name, compose_names - local_names)
+        assert compose_names - local_names <= CONTAINER_ONLY_ENV | {MULTIPROC_ENV}, (
+            name,
+            compose_names - local_names,
+        )
         if name != "gateway":
-            assert int(CSERVICES[name]["environment"]["PICKPLACE_METRICS__PORT"]) == DEFAULT_METRICS_PORTS[name]
+            assert (
+                int(CSERVICES[name]["environment"]["PICKPLACE_METRICS__PORT"]) == DEFAULT_METRICS_PORTS[name]
+            )
 
 
 def listening_ports(name: str) -> set[int]:
     env = {k: interpolate(v) for k, v in CSERVICES[name].get("environment", {}).items()}
-    own = {"robot": ["PICKPLACE_GRPC__ROBOT_PORT"], "motion": ["PICKPLACE_GRPC__MOTION_PORT"],
-           "grasp": ["PICKPLACE_GRPC__GRASP_PORT"], "vision": ["PICKPLACE_GRPC__VISION_PORT"],
-           "task": ["PICKPLACE_GRPC__TASK_PORT"],
-           "sim-dobot": ["PICKPLACE_SIM__DASHBOARD_PORT", "PICKPLACE_SIM__FEEDBACK_PORT",
-                         "PICKPLACE_SIM__SLOW_FEEDBACK_PORT"],
-           "gateway": ["PICKPLACE_GATEWAY__PORT", "PICKPLACE_GATEWAY__EDGE_GRPC_PORT"]}.get(name, [])
+    own = {
+        "robot": ["PICKPLACE_GRPC__ROBOT_PORT"],
+        "motion": ["PICKPLACE_GRPC__MOTION_PORT"],
+        "grasp": ["PICKPLACE_GRPC__GRASP_PORT"],
+        "vision": ["PICKPLACE_GRPC__VISION_PORT"],
+        "task": ["PICKPLACE_GRPC__TASK_PORT"],
+        "sim-dobot": [
+            "PICKPLACE_SIM__DASHBOARD_PORT",
+            "PICKPLACE_SIM__FEEDBACK_PORT",
+            "PICKPLACE_SIM__SLOW_FEEDBACK_PORT",
+        ],
+        "gateway": ["PICKPLACE_GATEWAY__PORT", "PICKPLACE_GATEWAY__EDGE_GRPC_PORT"],
+    }.get(name, [])
     ports = {int(env[k]) for k in own}
     if "PICKPLACE_METRICS__PORT" in env:
         ports.add(int(env["PICKPLACE_METRICS__PORT"]))
@@ -169,7 +195,9 @@ def listening_ports(name: str) -> set[int]:
 
 
 def test_ports_do_not_clash():
-    published = [p.rsplit(":", 1)[0].rsplit(":", 1)[-1] for s in CSERVICES.values() for p in s.get("ports", [])]
+    published = [
+        p.rsplit(":", 1)[0].rsplit(":", 1)[-1] for s in CSERVICES.values() for p in s.get("ports", [])
+    ]
     assert len(published) == len(set(published)), published
     namespaces: dict[str, list[int]] = {}
     for name in PICKPLACE_SERVICES:
@@ -203,8 +231,14 @@ def run_probe(service: str, env: dict[str, str]) -> subprocess.CompletedProcess[
     import os
 
     full = {k: v for k, v in os.environ.items() if not k.startswith("PICKPLACE_")} | env
-    return subprocess.run([sys.executable, "-m", "services.launcher", "health", service, "--timeout", "2"],
-                          env=full, cwd=REPO, capture_output=True, text=True, timeout=60)
+    return subprocess.run(
+        [sys.executable, "-m", "services.launcher", "health", service, "--timeout", "2"],
+        env=full,
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
 
 
 @pytest.mark.integration
@@ -229,10 +263,15 @@ async def test_the_health_probe_passes_on_a_serving_service_and_fails_without_on
 def test_no_secret_is_committed():
     pg = CSERVICES["postgres"]["environment"]["POSTGRES_PASSWORD"]
     assert pg.startswith("${POSTGRES_PASSWORD:?"), "the password must come from .env, with no default"
-    assert CSERVICES["gateway"]["environment"]["PICKPLACE_GATEWAY__API_TOKEN"].startswith("${PICKPLACE_API_TOKEN:?")
+    assert CSERVICES["gateway"]["environment"]["PICKPLACE_GATEWAY__API_TOKEN"].startswith(
+        "${PICKPLACE_API_TOKEN:?"
+    )
     assert "pgdata" in COMPOSE["volumes"] and any("pgdata:" in v for v in CSERVICES["postgres"]["volumes"])
-    example = dict(line.split("=", 1) for line in (REPO / ".env.example").read_text().splitlines()
-                   if line and not line.startswith("#"))
+    example = dict(
+        line.split("=", 1)
+        for line in (REPO / ".env.example").read_text().splitlines()
+        if line and not line.startswith("#")
+    )
     assert set(example) >= {"POSTGRES_PASSWORD", "GRAFANA_ADMIN_PASSWORD", "PICKPLACE_API_TOKEN"}
     assert all(v == "" for v in example.values())
     assert ".env" in (REPO / ".gitignore").read_text().splitlines()
@@ -250,7 +289,10 @@ def test_prometheus_scrapes_every_service_port():
             host = mode.removeprefix("service:") if mode.startswith("service:") else name
             expected.add(f"{host}:{env['PICKPLACE_METRICS__PORT']}")
     assert targets == expected
-    assert "./deploy/prometheus/prometheus.yml:/etc/prometheus/prometheus.yml:ro" in CSERVICES["prometheus"]["volumes"]
+    assert (
+        "./deploy/prometheus/prometheus.yml:/etc/prometheus/prometheus.yml:ro"
+        in CSERVICES["prometheus"]["volumes"]
+    )
 
 
 # ---------------------------------------------------------------------------- grafana
@@ -286,8 +328,17 @@ def test_grafana_provisioning_and_dashboard_are_valid():
                 assert t["datasource"]["uid"] == ds["uid"]
                 assert queried_metrics(t["expr"]), f"panel {p['title']!r} selects no metric: {t['expr']}"
     titles = " | ".join(p["title"].lower() for p in panels(boards["pickplace.json"]))
-    for topic in ("picks per minute", "success rate", "cycle time histogram", "cycle time percentiles",
-                  "vision latency", "planning latency", "joint positions", "robot mode", "emergency stops"):
+    for topic in (
+        "picks per minute",
+        "success rate",
+        "cycle time histogram",
+        "cycle time percentiles",
+        "vision latency",
+        "planning latency",
+        "joint positions",
+        "robot mode",
+        "emergency stops",
+    ):
         assert topic in titles, topic
 
 
@@ -325,7 +376,9 @@ def test_k8s_manifests_parse_and_are_listed():
 
 def test_k8s_runs_the_same_image_commands_and_variables_as_compose():
     docs = k8s_docs()
-    config = next(d for d in docs if d["kind"] == "ConfigMap" and d["metadata"]["name"] == "pickplace-env")["data"]
+    config = next(d for d in docs if d["kind"] == "ConfigMap" and d["metadata"]["name"] == "pickplace-env")[
+        "data"
+    ]
     assert set(config) == set(COMPOSE["x-env"])
     services = {d["metadata"]["name"] for d in docs if d["kind"] == "Service"}
     for key, host in config.items():

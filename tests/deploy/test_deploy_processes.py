@@ -62,8 +62,9 @@ async def stored_picks(schema: str, pick_ids: list[str], timeout_s: float = 15.0
     try:
         async with asyncio.timeout(timeout_s):
             while True:
-                rows = await conn.fetch(f'SELECT pick_id, success FROM "{schema}".picks WHERE pick_id = ANY($1)',
-                                        pick_ids)
+                rows = await conn.fetch(
+                    f'SELECT pick_id, success FROM "{schema}".picks WHERE pick_id = ANY($1)', pick_ids
+                )
                 if len(rows) == len(pick_ids):
                     return {r["pick_id"]: r["success"] for r in rows}
                 await asyncio.sleep(0.3)
@@ -75,16 +76,26 @@ async def stored_picks(schema: str, pick_ids: list[str], timeout_s: float = 15.0
 
 async def test_processes_pick_survive_a_vision_crash_and_keep_every_pick(tmp_path):
     async with postgres_schema() as schema:
-        s = load_settings("sim", overrides={
-            "database": {"url": PG_URL, "schema_name": schema},
-            "sim": {"seed": 3},
-            "logging": {"file": str(tmp_path / "test.log")},
-        })
+        s = load_settings(
+            "sim",
+            overrides={
+                "database": {"url": PG_URL, "schema_name": schema},
+                "sim": {"seed": 3},
+                "logging": {"file": str(tmp_path / "test.log")},
+            },
+        )
         ports = LocalPorts.free()
-        specs = topology(s, ports, api_token=TOKEN, metrics_root=tmp_path / "metrics", log_dir=tmp_path / "log",
-                         state_dir=tmp_path / "gateway")
-        async with Launcher(s, specs, ports, log_dir=tmp_path / "log", metrics_root=tmp_path / "metrics",
-                            restart_delay_s=0.5) as launcher:
+        specs = topology(
+            s,
+            ports,
+            api_token=TOKEN,
+            metrics_root=tmp_path / "metrics",
+            log_dir=tmp_path / "log",
+            state_dir=tmp_path / "gateway",
+        )
+        async with Launcher(
+            s, specs, ports, log_dir=tmp_path / "log", metrics_root=tmp_path / "metrics", restart_delay_s=0.5
+        ) as launcher:
             cs = launcher.settings
             pids = {name: child.pid for name, child in launcher.children.items()}
             assert set(pids) == set(SERVICES)
@@ -140,12 +151,17 @@ async def test_processes_pick_survive_a_vision_crash_and_keep_every_pick(tmp_pat
 
             # the live metrics: every series the dashboards query is exported by a running service
             gateway_text = http_get(f"http://127.0.0.1:{ports.gateway}/metrics")
-            per_service = {spec.name: http_get(f"http://127.0.0.1:{spec.metrics_port}/metrics")
-                           for spec in specs if spec.metrics_port is not None}
+            per_service = {
+                spec.name: http_get(f"http://127.0.0.1:{spec.metrics_port}/metrics")
+                for spec in specs
+                if spec.metrics_port is not None
+            }
             live = exposition_names(gateway_text).union(*(exposition_names(t) for t in per_service.values()))
             assert sum(exposition_samples(gateway_text, "pick_success_total")) >= 2
             assert sum(exposition_samples(per_service["vision"], "vision_latency_seconds_count")) > 0
-            queried = set().union(*(queried_metrics(e) for d in dashboards().values() for e in query_exprs(d)))
+            queried = set().union(
+                *(queried_metrics(e) for d in dashboards().values() for e in query_exprs(d))
+            )
             assert queried, "the dashboards query no metric"
             assert queried <= live, f"dashboard metrics no service exports: {sorted(queried - live)}"
         # stopped cleanly: every child has exited

@@ -139,7 +139,9 @@ class RunningGateway:
 
 
 @asynccontextmanager
-async def running_gateway(settings: Settings, bus: Bus | None = None, **kw: Any) -> AsyncIterator[RunningGateway]:
+async def running_gateway(
+    settings: Settings, bus: Bus | None = None, **kw: Any
+) -> AsyncIterator[RunningGateway]:
     app = create_app(settings, bus=bus, **kw)
     async with (
         GatewayServer(app, "127.0.0.1", 0) as server,
@@ -148,8 +150,14 @@ async def running_gateway(settings: Settings, bus: Bus | None = None, **kw: Any)
         yield RunningGateway(server, client, settings)
 
 
-def pick_event(i: int, *, success: bool = True, robot_id: str = "robot_01", stamp_ns: int | None = None,
-               pick_id: str | None = None) -> task_pb2.PickEvent:
+def pick_event(
+    i: int,
+    *,
+    success: bool = True,
+    robot_id: str = "robot_01",
+    stamp_ns: int | None = None,
+    pick_id: str | None = None,
+) -> task_pb2.PickEvent:
     ev = task_pb2.PickEvent(
         header=common_pb2.Header(stamp_ns=stamp_ns if stamp_ns is not None else time.time_ns()),
         pick_id=pick_id or uuid.uuid4().hex,
@@ -226,13 +234,23 @@ class FakeTaskController(task_pb2_grpc.TaskControllerServicer):
     async def _run(self, task: str, cycles: int) -> None:
         keys = CellKeys(self.cell_id)
         for cycle in range(1, cycles + 1):
-            for k, state in enumerate(("DETECT", "PLAN", "APPROACH", "GRASP", "LIFT", "PLACE", "RELEASE", "DONE")):
+            for k, state in enumerate(
+                ("DETECT", "PLAN", "APPROACH", "GRASP", "LIFT", "PLACE", "RELEASE", "DONE")
+            ):
                 if not self.running:
                     return
                 if self.bus is not None:
-                    self.bus.publish(keys.task_status, task_pb2.TaskStatus(
-                        state=state, progress=(k + 1) / 8, task=task, running=True, cycle_index=cycle,
-                        picks_completed=cycle - 1))
+                    self.bus.publish(
+                        keys.task_status,
+                        task_pb2.TaskStatus(
+                            state=state,
+                            progress=(k + 1) / 8,
+                            task=task,
+                            running=True,
+                            cycle_index=cycle,
+                            picks_completed=cycle - 1,
+                        ),
+                    )
                 await asyncio.sleep(self.cycle_s / 8)
             ev = pick_event(cycle)
             ev.task = task
@@ -241,8 +259,12 @@ class FakeTaskController(task_pb2_grpc.TaskControllerServicer):
             self.published.append(ev.pick_id)
         self.running = False
         if self.bus is not None:
-            self.bus.publish(keys.task_status, task_pb2.TaskStatus(state="IDLE", progress=0, task=task,
-                                                                   running=False, picks_completed=cycles))
+            self.bus.publish(
+                keys.task_status,
+                task_pb2.TaskStatus(
+                    state="IDLE", progress=0, task=task, running=False, picks_completed=cycles
+                ),
+            )
 
 
 @asynccontextmanager
@@ -258,4 +280,3 @@ async def fake_task_service(bus: Bus | None, cell_id: str, port: int) -> AsyncIt
         if servicer._runner is not None:
             servicer._runner.cancel()
         await server.stop(grace=0.2)
-

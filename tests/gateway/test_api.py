@@ -32,8 +32,10 @@ pytestmark = pytest.mark.integration
 
 async def seed(db: DatabaseSettings, n: int, t0: datetime) -> list[str]:
     """n picks one second apart from t0, every third one failed; returns pick_ids oldest first."""
-    events = [pick_event(i, success=i % 3 != 0, stamp_ns=int((t0 + timedelta(seconds=i)).timestamp() * 1e9))
-              for i in range(n)]
+    events = [
+        pick_event(i, success=i % 3 != 0, stamp_ns=int((t0 + timedelta(seconds=i)).timestamp() * 1e9))
+        for i in range(n)
+    ]
     engine = make_engine(db, db.url)
     try:
         async with session_factory(engine)() as s:
@@ -79,7 +81,10 @@ async def test_picks_paging_detail_and_404(database, settings, tmp_path):
         assert m["success_rate"] == pytest.approx(30 / 45)
         assert m["cycle_time_p50"] is not None and m["uptime"] > 0
         st = (await c.get("/api/v1/system/status")).json()
-        assert st["database"] == "ok" and st["picks_today"] in (45, 0)  # 0 only if the test ran over midnight UTC
+        assert st["database"] == "ok" and st["picks_today"] in (
+            45,
+            0,
+        )  # 0 only if the test ran over midnight UTC
         assert st["state"] == "OFFLINE"  # no robot driver, no task service in this test
 
 
@@ -101,7 +106,11 @@ async def test_mutations_need_the_token_and_nothing_moves(robot_settings, sim_se
                 ("PUT", "/api/v1/config", {"robot": {"speed_ratio": 10}}),
                 ("POST", "/api/v1/calibration/handshake", {"num_poses": 5}),
             ]
-            for headers in ({}, {"Authorization": "Bearer wrong-token-xxxxxxxxxxxx"}, {"Authorization": "Basic x"}):
+            for headers in (
+                {},
+                {"Authorization": "Bearer wrong-token-xxxxxxxxxxxx"},
+                {"Authorization": "Basic x"},
+            ):
                 for method, path, body in calls:
                     r = await c.request(method, path, json=body, headers=headers)
                     assert r.status_code == 401, (method, path, headers, r.text)
@@ -111,7 +120,13 @@ async def test_mutations_need_the_token_and_nothing_moves(robot_settings, sim_se
             assert not sim_server.controller.estop
             assert (await c.get("/api/v1/config")).json() == before
             # reads stay open
-            for path in ("/api/v1/system/status", "/api/v1/picks", "/api/v1/metrics", "/metrics", "/openapi.json"):
+            for path in (
+                "/api/v1/system/status",
+                "/api/v1/picks",
+                "/api/v1/metrics",
+                "/metrics",
+                "/openapi.json",
+            ):
                 assert (await c.get(path)).status_code == 200, path
 
 
@@ -125,7 +140,9 @@ async def test_start_stop_relay_and_503_without_task_service(settings, sqlite_db
         assert body["error"] == "RobotCommunicationError"
         assert f"task service unreachable at 127.0.0.1:{s.grpc.task_port}" in body["detail"]
         async with fake_task_service(None, s.cell_id, s.grpc.task_port) as task:
-            r = await gw.client.post("/api/v1/system/start", headers=AUTH, json={"task": "sort-cubes", "cycles": 3})
+            r = await gw.client.post(
+                "/api/v1/system/start", headers=AUTH, json={"task": "sort-cubes", "cycles": 3}
+            )
             assert r.status_code == 200 and r.json() == {"success": True, "message": "started sort-cubes"}
             r = await gw.client.post("/api/v1/system/start", headers=AUTH, json={"task": "juggle"})
             assert r.status_code == 422 and r.json()["errors"][0]["field"] == "body.task"
@@ -150,8 +167,11 @@ async def test_estop_reaches_the_simulated_dobot(robot_settings, sim_server, sql
             assert r.json()["success"] and r.json()["latency_ms"] > 0
             assert sim_server.controller.estop  # pressed before the response came back
             await task.estop_event.wait()
-            await wait_until(lambda: (gw.cell.hub.robot_status or {}).get("estop_active") is True, 5.0,
-                             "the gateway to see the e-stop")
+            await wait_until(
+                lambda: (gw.cell.hub.robot_status or {}).get("estop_active") is True,
+                5.0,
+                "the gateway to see the e-stop",
+            )
             st = (await gw.client.get("/api/v1/system/status")).json()
             assert st["state"] == "ESTOP" and st["robot"]["estop_active"] and 116 in st["robot"]["alarms"]
             prom = (await gw.client.get("/metrics")).text
@@ -202,18 +222,24 @@ async def test_put_config_validates_and_applies(settings, sqlite_db, tmp_path):
             fields = [e["field"] for e in r.json()["errors"]]
             assert any(f.startswith(field) for f in fields), (patch, fields)
             assert words in r.json()["detail"], (patch, r.json()["detail"])
-        r = await c.put("/api/v1/config", content=b"[1, 2]", headers={**AUTH, "Content-Type": "application/json"})
+        r = await c.put(
+            "/api/v1/config", content=b"[1, 2]", headers={**AUTH, "Content-Type": "application/json"}
+        )
         assert r.status_code == 422
         assert (await c.get("/api/v1/config")).json()["robot"]["speed_ratio"] == settings.robot.speed_ratio
 
-        r = await c.put("/api/v1/config", json={"robot": {"speed_ratio": 25}, "motion": {"planner": "PRM"}},
-                        headers=AUTH)
+        r = await c.put(
+            "/api/v1/config", json={"robot": {"speed_ratio": 25}, "motion": {"planner": "PRM"}}, headers=AUTH
+        )
         assert r.status_code == 200 and sorted(r.json()["updated"]) == ["motion.planner", "robot.speed_ratio"]
         # published to the services, which apply these at once (test_config_live shows them do it)
         assert sorted(r.json()["applied_now"]) == ["motion.planner", "robot.speed_ratio"]
         assert r.json()["applied_next_cycle"] == [] and "restart" in r.json()["note"]
-        r = await c.put("/api/v1/config", json={"gateway": {"joint_state_rate_hz": 5},
-                                                "cycle": {"dwell_s": 0.2}}, headers=AUTH)
+        r = await c.put(
+            "/api/v1/config",
+            json={"gateway": {"joint_state_rate_hz": 5}, "cycle": {"dwell_s": 0.2}},
+            headers=AUTH,
+        )
         assert r.json()["applied_now"] == ["gateway.joint_state_rate_hz"]
         assert r.json()["applied_next_cycle"] == ["cycle.dwell_s"]
         cfg = (await c.get("/api/v1/config")).json()
@@ -237,8 +263,10 @@ async def test_limits_cors_docs_and_prometheus(settings, sqlite_db, tmp_path):
         r = await c.put("/api/v1/config", content=chunks(), headers=AUTH)
         assert r.status_code == 413
 
-        r = await c.options("/api/v1/system/start", headers={
-            "Origin": "http://evil.example", "Access-Control-Request-Method": "POST"})
+        r = await c.options(
+            "/api/v1/system/start",
+            headers={"Origin": "http://evil.example", "Access-Control-Request-Method": "POST"},
+        )
         assert "access-control-allow-origin" not in r.headers
         r = await c.get("/api/v1/picks", headers={"Origin": "http://evil.example"})
         assert "access-control-allow-origin" not in r.headers
@@ -246,9 +274,17 @@ async def test_limits_cors_docs_and_prometheus(settings, sqlite_db, tmp_path):
 
         assert (await c.get("/docs")).status_code == 200
         paths = (await c.get("/openapi.json")).json()["paths"]
-        for p in ("/api/v1/system/status", "/api/v1/system/start", "/api/v1/system/stop", "/api/v1/system/estop",
-                  "/api/v1/picks", "/api/v1/picks/{pick_id}", "/api/v1/metrics", "/api/v1/calibration/handshake",
-                  "/api/v1/config"):
+        for p in (
+            "/api/v1/system/status",
+            "/api/v1/system/start",
+            "/api/v1/system/stop",
+            "/api/v1/system/estop",
+            "/api/v1/picks",
+            "/api/v1/picks/{pick_id}",
+            "/api/v1/metrics",
+            "/api/v1/calibration/handshake",
+            "/api/v1/config",
+        ):
             assert p in paths, p
 
         keys = CellKeys(s.cell_id)
@@ -274,8 +310,11 @@ async def test_calibration_run_progress_and_record(settings, sqlite_db, tmp_path
             progress((i + 1) / num_poses, f"pose {i + 1}/{num_poses}")
             if i == 1:
                 await release.wait()
-        return CalibrationOutcome({"T_base_camera": [[1, 0, 0, 0.9], [0, 1, 0, 0], [0, 0, 1, 0.6], [0, 0, 0, 1]]},
-                                  0.42, "14 of 15 views used")
+        return CalibrationOutcome(
+            {"T_base_camera": [[1, 0, 0, 0.9], [0, 1, 0, 0], [0, 0, 1, 0.6], [0, 0, 0, 1]]},
+            0.42,
+            "14 of 15 views used",
+        )
 
     s = gateway_settings(settings, sqlite_db, tmp_path)
     async with running_gateway(s, calibration_executor=executor) as gw:
@@ -290,7 +329,9 @@ async def test_calibration_run_progress_and_record(settings, sqlite_db, tmp_path
         r = await c.post("/api/v1/calibration/handshake", json={"num_poses": 2}, headers=AUTH)
         assert r.status_code == 422 and r.json()["errors"][0]["field"] == "body.num_poses"
         release.set()
-        await wait_until(lambda: gw.cell.calibration.runs[cid].status == "succeeded", 5.0, "the run to finish")
+        await wait_until(
+            lambda: gw.cell.calibration.runs[cid].status == "succeeded", 5.0, "the run to finish"
+        )
         view = (await c.get(f"/api/v1/calibration/{cid}")).json()
         assert view["status"] == "succeeded" and view["reprojection_error"] == 0.42
         assert view["parameters"]["T_base_camera"][0][3] == 0.9
@@ -299,7 +340,9 @@ async def test_calibration_run_progress_and_record(settings, sqlite_db, tmp_path
     async with session_factory(engine)() as sess:
         row = await sess.get(Calibration, 1)
     await engine.dispose()
-    assert row is not None and row.run_id == cid and row.status == "succeeded" and row.reprojection_error == 0.42
+    assert (
+        row is not None and row.run_id == cid and row.status == "succeeded" and row.reprojection_error == 0.42
+    )
 
 
 async def test_calibration_without_routine_is_503(settings, sqlite_db, tmp_path):
@@ -354,7 +397,10 @@ async def test_embedded_gateway_generates_a_token_and_migrates(settings, sqlite_
         assert len(token) >= 40
         async with httpx.AsyncClient(base_url=server.url) as c:
             assert (await c.get("/api/v1/picks")).status_code == 200  # migrated by itself
-            r = await c.put("/api/v1/config", json={"robot": {"speed_ratio": 40}},
-                            headers={"Authorization": f"Bearer {token}"})
+            r = await c.put(
+                "/api/v1/config",
+                json={"robot": {"speed_ratio": 40}},
+                headers={"Authorization": f"Bearer {token}"},
+            )
             assert r.status_code == 200
             assert (await c.put("/api/v1/config", json={"robot": {"speed_ratio": 41}})).status_code == 401

@@ -61,7 +61,9 @@ def camera_jpeg() -> bytes:
 async def test_dashboard_live_start_pick_and_estop(robot_settings, sim_server, sqlite_db, tmp_path):
     from playwright.async_api import async_playwright, expect
 
-    assert CHROMIUM_INSTALLED, "Debian's chromium is missing: `make install` installs it (apt-get install chromium)"
+    assert CHROMIUM_INSTALLED, (
+        "Debian's chromium is missing: `make install` installs it (apt-get install chromium)"
+    )
     await migrate_up(sqlite_db)
     s = gateway_settings(robot_settings, sqlite_db, tmp_path)
     async with Bus(s.zenoh) as bus, RobotService(s, bus, grpc_port=0) as robot:
@@ -72,7 +74,9 @@ async def test_dashboard_live_start_pick_and_estop(robot_settings, sim_server, s
             running_gateway(s, bus) as gw,
             async_playwright() as pw,
         ):
-            browser = await pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True)
+            browser = await pw.chromium.launch(
+                executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True
+            )
             try:
                 page = await browser.new_page(viewport={"width": 1280, "height": 800})
                 errors: list[str] = []
@@ -82,7 +86,9 @@ async def test_dashboard_live_start_pick_and_estop(robot_settings, sim_server, s
                 # live joint states from the real driver: the sim starts at home (joint 3 at 90 deg)
                 await expect(page.get_by_test_id("joint-3")).to_have_text("90.00", timeout=15_000)
                 await expect(page.get_by_test_id("robot-mode")).to_have_text("ENABLE", timeout=10_000)
-                await expect(page.locator("#robot3d")).to_have_attribute("data-loaded", "true", timeout=15_000)
+                await expect(page.locator("#robot3d")).to_have_attribute(
+                    "data-loaded", "true", timeout=15_000
+                )
 
                 # the vision service's debug image appears in the camera panel
                 bus.publish(CellKeys(s.cell_id).vision_debug_image, vision_pb2.DebugImage(jpeg=camera_jpeg()))
@@ -99,7 +105,9 @@ async def test_dashboard_live_start_pick_and_estop(robot_settings, sim_server, s
                 move = asyncio.ensure_future(robot.driver.move_joints(target, speed_ratio=10))
                 await robot.driver.client.wait_feedback(lambda fb: fb.q[0] > np.deg2rad(3), 5.0)
                 await page.get_by_role("button", name="emergency stop").click()
-                await wait_until(lambda: sim_server.controller.estop, 5.0, "the simulated controller's e-stop")
+                await wait_until(
+                    lambda: sim_server.controller.estop, 5.0, "the simulated controller's e-stop"
+                )
                 await expect(page.get_by_test_id("robot-mode")).to_have_text("E-STOP", timeout=10_000)
                 await expect(page.get_by_test_id("state")).to_have_text("ESTOP", timeout=10_000)
                 with pytest.raises(Exception):  # noqa: B017 — the move is aborted by the e-stop

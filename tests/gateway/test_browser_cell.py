@@ -17,11 +17,17 @@ pytestmark = [pytest.mark.integration, pytest.mark.slow]
 async def test_dashboard_start_runs_a_real_pick(tmp_path):
     from playwright.async_api import async_playwright, expect
 
-    assert CHROMIUM_INSTALLED, "Debian's chromium is missing: `make install` installs it (apt-get install chromium)"
-    s = cell_settings(tmp_path, gateway={"port": 0}, database={"url": f"sqlite+aiosqlite:///{tmp_path / 'cell.db'}"})
+    assert CHROMIUM_INSTALLED, (
+        "Debian's chromium is missing: `make install` installs it (apt-get install chromium)"
+    )
+    s = cell_settings(
+        tmp_path, gateway={"port": 0}, database={"url": f"sqlite+aiosqlite:///{tmp_path / 'cell.db'}"}
+    )
     async with Cell(s, seed=3) as cell, embedded_gateway(cell.settings, cell.bus) as (_server, url):
         async with async_playwright() as pw:
-            browser = await pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True)
+            browser = await pw.chromium.launch(
+                executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True
+            )
             try:
                 page = await browser.new_page(viewport={"width": 1280, "height": 800})
                 errors: list[str] = []
@@ -31,7 +37,9 @@ async def test_dashboard_start_runs_a_real_pick(tmp_path):
                 await expect(page.locator("#camera-img")).to_be_visible(timeout=20_000)  # the vision overlay
                 await page.get_by_role("button", name="start the task").click()
                 # one real pick-and-stand in the twin: detect, plan, move, place
-                await expect(page.get_by_test_id("history").locator("tr.ok")).to_have_count(1, timeout=120_000)
+                await expect(page.get_by_test_id("history").locator("tr.ok")).to_have_count(
+                    1, timeout=120_000
+                )
                 await expect(page.get_by_test_id("success-rate")).to_have_text("100.0 %", timeout=10_000)
                 ARTIFACTS.mkdir(exist_ok=True)
                 await page.screenshot(path=str(ARTIFACTS / "dashboard-cell.png"))

@@ -20,8 +20,12 @@ pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
 
 async def test_calibration_handshake_recovers_the_twin_camera(tmp_path):
-    base = cell_settings(tmp_path, gateway={"port": 0}, sim={"speed": 3.0},
-                         database={"url": f"sqlite+aiosqlite:///{tmp_path / 'cal.db'}"})
+    base = cell_settings(
+        tmp_path,
+        gateway={"port": 0},
+        sim={"speed": 3.0},
+        database={"url": f"sqlite+aiosqlite:///{tmp_path / 'cal.db'}"},
+    )
     s = twin_calibration_settings(base)
     async with (
         Cell(s, seed=0) as cell,

@@ -21,7 +21,9 @@ from tests.gateway.conftest import AUTH, gateway_settings, migrate_up, running_g
 pytestmark = pytest.mark.integration
 
 
-async def test_put_config_applies_live_in_the_services(robot_settings, sim_server, sqlite_db, tmp_path, monkeypatch):
+async def test_put_config_applies_live_in_the_services(
+    robot_settings, sim_server, sqlite_db, tmp_path, monkeypatch
+):
     monkeypatch.setattr(gateway_app, "CONFIG_REPUBLISH_S", 0.3)
     await migrate_up(sqlite_db)
     cell = gateway_settings(robot_settings, sqlite_db, tmp_path)
@@ -31,18 +33,35 @@ async def test_put_config_applies_live_in_the_services(robot_settings, sim_serve
         assert (ratios.speed_factor, ratios.acc_j, ratios.acc_l) == (50, 50, 50)
         motion = MotionPlannerServicer(cell)
         async with LiveConfig(bus, cell, motion.on_config):
-            zs = cell.zenoh.model_copy(update={"listen": [f"tcp/127.0.0.1:{free_port()}"], "connect": cell.zenoh.listen})
-            gs = cell.model_copy(update={"zenoh": zs, "grpc": cell.grpc.model_copy(update={"robot_port": robot.grpc_port})})
+            zs = cell.zenoh.model_copy(
+                update={"listen": [f"tcp/127.0.0.1:{free_port()}"], "connect": cell.zenoh.listen}
+            )
+            gs = cell.model_copy(
+                update={"zenoh": zs, "grpc": cell.grpc.model_copy(update={"robot_port": robot.grpc_port})}
+            )
             async with running_gateway(gs) as gw:
-                patch = {"robot": {"speed_ratio": 30, "acc_ratio": 40,
-                                   "workspace": {"min": [-0.85, -0.85, 0.0], "max": [0.85, 0.85, 0.2]}},
-                         "motion": {"planner": "PRM", "velocity_scale": 0.5}}
+                patch = {
+                    "robot": {
+                        "speed_ratio": 30,
+                        "acc_ratio": 40,
+                        "workspace": {"min": [-0.85, -0.85, 0.0], "max": [0.85, 0.85, 0.2]},
+                    },
+                    "motion": {"planner": "PRM", "velocity_scale": 0.5},
+                }
                 r = await gw.client.put("/api/v1/config", json=patch, headers=AUTH)
                 assert r.status_code == 200, r.text
-                assert set(r.json()["applied_now"]) == {"robot.speed_ratio", "robot.acc_ratio", "robot.workspace.max",
-                                                        "motion.planner", "motion.velocity_scale"}
-                await wait_until(lambda: (ratios.speed_factor, ratios.acc_j, ratios.acc_l) == (30, 40, 40), 10.0,
-                                 "the controller's SpeedFactor/AccJ/AccL to follow PUT /config")
+                assert set(r.json()["applied_now"]) == {
+                    "robot.speed_ratio",
+                    "robot.acc_ratio",
+                    "robot.workspace.max",
+                    "motion.planner",
+                    "motion.velocity_scale",
+                }
+                await wait_until(
+                    lambda: (ratios.speed_factor, ratios.acc_j, ratios.acc_l) == (30, 40, 40),
+                    10.0,
+                    "the controller's SpeedFactor/AccJ/AccL to follow PUT /config",
+                )
                 await wait_until(lambda: motion.motion.planner == "PRM", 10.0, "the motion service to follow")
                 assert motion.motion.velocity_scale == 0.5 and robot.settings.robot.speed_ratio == 30
                 # the smaller workspace guards the next command: a pose with the tool above 0.2 m is refused
@@ -53,7 +72,9 @@ async def test_put_config_applies_live_in_the_services(robot_settings, sim_serve
                 # a service (re)started after the PUT catches up from the gateway's republication
                 late = LiveConfig(bus, cell)
                 async with late:
-                    await wait_until(lambda: late.settings.robot.speed_ratio == 30, 10.0, "a late service to catch up")
+                    await wait_until(
+                        lambda: late.settings.robot.speed_ratio == 30, 10.0, "a late service to catch up"
+                    )
                 assert late.settings.motion.planner == "PRM" and late.updates_applied == 1
 
                 # a bad value never leaves the gateway; the services keep what they have

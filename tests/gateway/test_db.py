@@ -54,7 +54,9 @@ async def test_migration_matches_models_on_postgres(postgres_db: DatabaseSetting
         await migrate.upgrade(engine, postgres_db)
         async with engine.connect() as conn:
             diff = await conn.run_sync(
-                lambda c: compare_metadata(MigrationContext.configure(c, opts={"compare_type": True}), Base.metadata)
+                lambda c: compare_metadata(
+                    MigrationContext.configure(c, opts={"compare_type": True}), Base.metadata
+                )
             )
         assert diff == [], f"models and migrations disagree: {diff}"
     finally:
@@ -89,8 +91,15 @@ async def test_insert_is_idempotent_and_pages(database: DatabaseSettings):
             page3 = await repo.page(limit=10, offset=20)
             assert [p.pick_id for p in page3] == [e.pick_id for e in reversed(events)][20:]
             row = await repo.get(page[0].id)
-            assert row is not None and row.pick_pose == {"x": 0.45, "y": 0.24, "z": 0.02, "qx": 0, "qy": 0,
-                                                          "qz": 0, "qw": 1.0}
+            assert row is not None and row.pick_pose == {
+                "x": 0.45,
+                "y": 0.24,
+                "z": 0.02,
+                "qx": 0,
+                "qy": 0,
+                "qz": 0,
+                "qw": 1.0,
+            }
             assert row.stage_durations == {"DETECT": 0.4, "PLAN": 0.6, "APPROACH": 2.0}
             failed = next(p for p in page if not p.success)
             assert failed.error_code == "GraspFailureError" and "slipped" in (failed.error_message or "")

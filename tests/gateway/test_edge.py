@@ -44,7 +44,9 @@ async def test_edge_needs_the_token_and_relays_to_the_driver(robot_settings, sim
                         await stub.Enable(robot_pb2.EnableRequest(), metadata=md)
                     assert err.value.code() == grpc.StatusCode.UNAUTHENTICATED
                     with pytest.raises(grpc.aio.AioRpcError) as err:
-                        async for _ in stub.StreamJointStates(robot_pb2.StreamJointStatesRequest(), metadata=md):
+                        async for _ in stub.StreamJointStates(
+                            robot_pb2.StreamJointStatesRequest(), metadata=md
+                        ):
                             break
                     assert err.value.code() == grpc.StatusCode.UNAUTHENTICATED
                     with pytest.raises(grpc.aio.AioRpcError) as err:
@@ -57,15 +59,23 @@ async def test_edge_needs_the_token_and_relays_to_the_driver(robot_settings, sim
                 assert np.allclose(np.rad2deg(js.position), [0, 0, 90, 0, -90, 0], atol=1e-6)
                 await stub.Enable(robot_pb2.EnableRequest(), metadata=META)
                 target = np.deg2rad([10, 5, 85, 0, -90, 0])
-                r = await stub.MoveJoints(robot_pb2.MoveJointsRequest(positions=target.tolist(), speed_ratio=100),
-                                          metadata=META, timeout=20)
+                r = await stub.MoveJoints(
+                    robot_pb2.MoveJointsRequest(positions=target.tolist(), speed_ratio=100),
+                    metadata=META,
+                    timeout=20,
+                )
                 assert r.success and np.allclose(r.final_positions, target, atol=1e-6)
-                with pytest.raises(LimitViolationError, match="joint 3"), rpc_errors():  # the driver's error type
-                    await stub.MoveJoints(robot_pb2.MoveJointsRequest(positions=[0, 0, 3.0, 0, 0, 0]),
-                                          metadata=META)
+                with (
+                    pytest.raises(LimitViolationError, match="joint 3"),
+                    rpc_errors(),
+                ):  # the driver's error type
+                    await stub.MoveJoints(
+                        robot_pb2.MoveJointsRequest(positions=[0, 0, 3.0, 0, 0, 0]), metadata=META
+                    )
                 n = 0
-                async for msg in stub.StreamJointStates(robot_pb2.StreamJointStatesRequest(max_rate_hz=50),
-                                                        metadata=META):
+                async for msg in stub.StreamJointStates(
+                    robot_pb2.StreamJointStatesRequest(max_rate_hz=50), metadata=META
+                ):
                     assert len(msg.position) == 6
                     n += 1
                     if n == 5:
@@ -73,8 +83,9 @@ async def test_edge_needs_the_token_and_relays_to_the_driver(robot_settings, sim
 
                 bus.publish(CellKeys(s.cell_id).pick_events, pick_event(0))
                 await wait_until(lambda: gw.cell.writer.written == 1, 5.0, "the pick in the database")
-                async for sample in metrics.StreamMetrics(gateway_pb2.StreamMetricsRequest(period_s=0.1),
-                                                          metadata=META):
+                async for sample in metrics.StreamMetrics(
+                    gateway_pb2.StreamMetricsRequest(period_s=0.1), metadata=META
+                ):
                     assert sample.picks_total == 1 and sample.success_rate == 1.0
                     assert sample.cycle_time == pytest.approx(8.0) and sample.database_ok
                     assert sample.state in ("IDLE", "RUNNING", "ENABLE")

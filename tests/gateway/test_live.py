@@ -25,15 +25,20 @@ from tests.gateway.conftest import gateway_settings, migrate_up, pick_event, run
 pytestmark = pytest.mark.integration
 
 
-async def test_websocket_streams_decimated_joints_status_and_picks(robot_settings, sim_server, sqlite_db, tmp_path):
+async def test_websocket_streams_decimated_joints_status_and_picks(
+    robot_settings, sim_server, sqlite_db, tmp_path
+):
     await migrate_up(sqlite_db)
     cell = gateway_settings(robot_settings, sqlite_db, tmp_path, joint_state_rate_hz=20.0)
     keys = CellKeys(cell.cell_id)
     async with Bus(cell.zenoh) as bus, RobotService(cell, bus, grpc_port=0) as robot:
         # the gateway's own session: connects to the cell's endpoint, listens on another
-        zs = cell.zenoh.model_copy(update={"listen": [f"tcp/127.0.0.1:{free_port()}"], "connect": cell.zenoh.listen})
-        gs = cell.model_copy(update={
-            "zenoh": zs, "grpc": cell.grpc.model_copy(update={"robot_port": robot.grpc_port})})
+        zs = cell.zenoh.model_copy(
+            update={"listen": [f"tcp/127.0.0.1:{free_port()}"], "connect": cell.zenoh.listen}
+        )
+        gs = cell.model_copy(
+            update={"zenoh": zs, "grpc": cell.grpc.model_copy(update={"robot_port": robot.grpc_port})}
+        )
         async with running_gateway(gs) as gw:
             url = gw.server.url.replace("http://", "ws://") + "/api/v1/live"
             async with websockets.connect(url) as ws:

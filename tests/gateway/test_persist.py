@@ -101,8 +101,14 @@ class FlakyStore:
 async def test_writer_buffers_through_an_outage_and_writes_once(tmp_path):
     store = FlakyStore()
     written: list[str] = []
-    writer = PickWriter(PickBuffer(4, tmp_path / "s.jsonl"), store.insert, batch_size=3, retry_initial_s=0.01,
-                        retry_max_s=0.05, on_written=lambda ps: written.extend(p.event.pick_id for p in ps))
+    writer = PickWriter(
+        PickBuffer(4, tmp_path / "s.jsonl"),
+        store.insert,
+        batch_size=3,
+        retry_initial_s=0.01,
+        retry_max_s=0.05,
+        on_written=lambda ps: written.extend(p.event.pick_id for p in ps),
+    )
     task = asyncio.create_task(writer.run())
     try:
         first = [pick_event(i) for i in range(3)]
@@ -197,10 +203,13 @@ async def postgres_behind_proxy() -> AsyncIterator[tuple[DatabaseSettings, Datab
         await migrate_up(direct)
         proxy = TcpProxy(5432)
         await proxy.start()
-        via_proxy = direct.model_copy(update={
-            "url": PG_URL.replace("127.0.0.1:5432", f"127.0.0.1:{proxy.port}"),
-            "connect_timeout_s": 1.0, "command_timeout_s": 2.0,
-        })
+        via_proxy = direct.model_copy(
+            update={
+                "url": PG_URL.replace("127.0.0.1:5432", f"127.0.0.1:{proxy.port}"),
+                "connect_timeout_s": 1.0,
+                "command_timeout_s": 2.0,
+            }
+        )
         try:
             yield direct, via_proxy, proxy
         finally:
@@ -241,8 +250,11 @@ async def test_no_pick_lost_when_postgres_connection_is_cut(settings, tmp_path):
             bus.publish(keys.pick_events, pick_event(0, pick_id=published[3]))
             await proxy.start()
             await publish(5)
-            await wait_until(lambda: len(cell.writer.buffer) == 0 and cell.writer.database_ok, 15.0,
-                             "the buffer to drain after the database came back")
+            await wait_until(
+                lambda: len(cell.writer.buffer) == 0 and cell.writer.database_ok,
+                15.0,
+                "the buffer to drain after the database came back",
+            )
             await wait_until(lambda: cell.writer.written == 35, 10.0, "35 distinct picks written")
 
         engine = make_engine(direct, PG_URL)
@@ -274,7 +286,9 @@ async def test_picks_buffered_at_shutdown_are_written_by_the_next_start(settings
             assert len([line for line in spill.read_text().splitlines() if line]) == 6
             await proxy.start()
             async with running_gateway(s, bus) as gw:
-                await wait_until(lambda: gw.cell.writer.written == 6, 10.0, "the 6 picks written after restart")
+                await wait_until(
+                    lambda: gw.cell.writer.written == 6, 10.0, "the 6 picks written after restart"
+                )
                 r = await gw.client.get("/api/v1/picks")
                 assert sorted(p["pick_id"] for p in r.json()) == sorted(e.pick_id for e in events)
         assert spill.read_text() == ""

@@ -28,7 +28,9 @@ def base_settings():  # type: ignore[no-untyped-def]
 
 # ---------------------------------------------------------------------------- config patches
 def test_patch_applies_valid_values_only(base_settings):
-    new, changed = apply_patch(base_settings, {"robot": {"speed_ratio": 20, "workspace": {"max": [0.8, 0.8, 1.0]}}})
+    new, changed = apply_patch(
+        base_settings, {"robot": {"speed_ratio": 20, "workspace": {"max": [0.8, 0.8, 1.0]}}}
+    )
     assert new.robot.speed_ratio == 20 and new.robot.workspace.max == (0.8, 0.8, 1.0)
     assert new.robot.workspace.min == base_settings.robot.workspace.min  # merged, not replaced
     assert sorted(changed) == ["robot.speed_ratio", "robot.workspace.max"]
@@ -100,7 +102,9 @@ def test_token_and_database_from_environment(monkeypatch):
     monkeypatch.setenv("PICKPLACE_GATEWAY__API_TOKEN", "env-token-0123456789")
     monkeypatch.setenv("PICKPLACE_DATABASE__URL", "postgresql+asyncpg://u@127.0.0.1:5432/cell")
     s = load_settings("sim", overrides={"logging": {"file": None}})
-    assert s.gateway.api_token is not None and s.gateway.api_token.get_secret_value() == "env-token-0123456789"
+    assert (
+        s.gateway.api_token is not None and s.gateway.api_token.get_secret_value() == "env-token-0123456789"
+    )
     assert "env-token" not in repr(s.gateway)  # never printed
     assert s.database.url.startswith("postgresql+asyncpg://")
 
@@ -195,8 +199,14 @@ def test_metrics_registries_are_independent_and_named_by_convention():
 
 def test_health_sample_has_the_columns(tmp_path):
     s = health.sample(tmp_path, with_gpu=False)
-    assert set(s) == {"cpu_percent", "memory_percent", "disk_percent", "gpu_percent", "gpu_memory_mb",
-                      "temperature_celsius"}
+    assert set(s) == {
+        "cpu_percent",
+        "memory_percent",
+        "disk_percent",
+        "gpu_percent",
+        "gpu_memory_mb",
+        "temperature_celsius",
+    }
     assert 0 <= s["memory_percent"] <= 100 and 0 <= s["disk_percent"] <= 100
     assert s["gpu_percent"] is None
 
@@ -250,7 +260,8 @@ def test_metrics_multiprocess_mode_aggregates_every_process(tmp_path):
         "from services.common.metrics import CellMetrics, render\n"
         "print(render(CellMetrics().registry).decode())\n"
     )
-    out = subprocess.run([sys.executable, "-c", read], env=env, check=True, timeout=60, capture_output=True,
-                         text=True).stdout
+    out = subprocess.run(
+        [sys.executable, "-c", read], env=env, check=True, timeout=60, capture_output=True, text=True
+    ).stdout
     assert 'pick_success_total{object_class="rod",robot_id="robot_01"} 2.0' in out
     assert 'cycle_time_seconds_count{robot_id="robot_01"} 2.0' in out

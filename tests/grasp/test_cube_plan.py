@@ -47,10 +47,22 @@ def test_each_colour_goes_to_its_drop_zone(color: str, seed: int) -> None:
     assert np.allclose(placed[:2, 3], zone, atol=1e-9)  # centred over the zone
     assert placed[2, 3] - SIZE / 2 == pytest.approx(CFG.table_z_m + CFG.cubes.place_clearance_m)
     assert placed[:3, 2] @ np.array([0.0, 0.0, 1.0]) > 1 - 1e-9  # set down upright
-    assert p.names() == ["SAFE_HOME", "PRE_GRASP", "GRASP", "LIFT", "TRANSPORT", "PLACE_ABOVE", "PLACE",
-                         "RELEASE", "RETRACT"]
+    assert p.names() == [
+        "SAFE_HOME",
+        "PRE_GRASP",
+        "GRASP",
+        "LIFT",
+        "TRANSPORT",
+        "PLACE_ABOVE",
+        "PLACE",
+        "RELEASE",
+        "RETRACT",
+    ]
     assert [(w.name, w.gripper) for w in p.waypoints if w.gripper] == [
-        ("PRE_GRASP", "open"), ("GRASP", "close"), ("RELEASE", "open")]
+        ("PRE_GRASP", "open"),
+        ("GRASP", "close"),
+        ("RELEASE", "open"),
+    ]
     assert p.waypoint("LIFT").T_base_tool[2, 3] >= CFG.cubes.transport_height_m
     for w in p.waypoints:
         assert SPEC.within_limits(w.q)
@@ -102,7 +114,10 @@ def test_alternative_takes_the_next_feasible_grasp_or_turn() -> None:
     cube = make_cube("green", 6)
     first, second = plan(cube), plan(cube, alternative=1)
     assert np.allclose(first.place_position, second.place_position)
-    assert not (np.allclose(first.waypoint("GRASP").q, second.waypoint("GRASP").q)
-                and np.allclose(first.waypoint("PLACE").q, second.waypoint("PLACE").q))
+    assert not (
+        np.allclose(first.waypoint("GRASP").q, second.waypoint("GRASP").q)
+        and np.allclose(first.waypoint("PLACE").q, second.waypoint("PLACE").q)
+    )
     assert second.notes["joint_motion_rad"] >= first.notes["joint_motion_rad"] - 1e-9 or (
-        second.grasp.quality < first.grasp.quality)
+        second.grasp.quality < first.grasp.quality
+    )

@@ -36,8 +36,11 @@ async def stub() -> AsyncIterator[grasp_pb2_grpc.GraspPlannerStub]:
 async def test_compute_grasps_for_a_lying_cylinder(stub) -> None:  # type: ignore[no-untyped-def]
     R = rotation_z(0.5) @ np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
     req = grasp_pb2.ComputeGraspsRequest(
-        object_pose=matrix_to_pose(pose(R, [0.45, 0.0, 0.011])), object_shape="cylinder",
-        object_width=0.022, object_height=0.2, num_candidates=5,
+        object_pose=matrix_to_pose(pose(R, [0.45, 0.0, 0.011])),
+        object_shape="cylinder",
+        object_width=0.022,
+        object_height=0.2,
+        num_candidates=5,
     )
     with rpc_errors():
         res = await stub.ComputeGrasps(req)
@@ -78,19 +81,31 @@ async def test_unreachable_rod_comes_back_as_ik_failure(stub) -> None:  # type: 
 
 async def test_nan_input_comes_back_as_invalid_input(stub) -> None:  # type: ignore[no-untyped-def]
     with pytest.raises(InvalidInputError, match="NaN"), rpc_errors():
-        await stub.PlanPickAndStand(grasp_pb2.PickAndStandRequest(center=[float("nan"), 0.0, 0.011], axis=[0, 1, 0]))
+        await stub.PlanPickAndStand(
+            grasp_pb2.PickAndStandRequest(center=[float("nan"), 0.0, 0.011], axis=[0, 1, 0])
+        )
     bad_pose = common_pb2.Pose(x=0.5, qw=0.0)
     with pytest.raises(InvalidInputError, match="quaternion"), rpc_errors():
-        await stub.ComputeGrasps(grasp_pb2.ComputeGraspsRequest(object_pose=bad_pose, object_shape="box",
-                                                                object_width=0.05, object_depth=0.05,
-                                                                object_height=0.05))
+        await stub.ComputeGrasps(
+            grasp_pb2.ComputeGraspsRequest(
+                object_pose=bad_pose,
+                object_shape="box",
+                object_width=0.05,
+                object_depth=0.05,
+                object_height=0.05,
+            )
+        )
 
 
 async def test_plan_pick_and_place_uses_the_colour_zone(stub) -> None:  # type: ignore[no-untyped-def]
     req = grasp_pb2.PickAndPlaceRequest(
-        cube_pose=matrix_to_pose(pose(rotation_z(0.2), [0.5, 0.1, 0.025])), color="green",
-        obstacles=[motion_pb2.CollisionBox(name="wall", x_min=0.3, x_max=0.5, y_min=0.315, y_max=0.365,
-                                           z_min=0.0, z_max=0.12)],
+        cube_pose=matrix_to_pose(pose(rotation_z(0.2), [0.5, 0.1, 0.025])),
+        color="green",
+        obstacles=[
+            motion_pb2.CollisionBox(
+                name="wall", x_min=0.3, x_max=0.5, y_min=0.315, y_max=0.365, z_min=0.0, z_max=0.12
+            )
+        ],
     )
     with rpc_errors():
         plan = await stub.PlanPickAndPlace(req)
@@ -112,10 +127,12 @@ async def test_recovery_hooks_alternative_plan_and_grasp_offset(stub) -> None:  
     base = grasp_pb2.PickAndStandRequest(center=[0.5, -0.05, 0.011], axis=[1.0, 0.0, 0.0])
     with rpc_errors():
         best = await stub.PlanPickAndStand(base)
-        alt = await stub.PlanPickAndStand(grasp_pb2.PickAndStandRequest(center=base.center, axis=base.axis,
-                                                                        alternative=1))
-        shifted = await stub.PlanPickAndStand(grasp_pb2.PickAndStandRequest(center=base.center, axis=base.axis,
-                                                                            grasp_offset=0.03))
+        alt = await stub.PlanPickAndStand(
+            grasp_pb2.PickAndStandRequest(center=base.center, axis=base.axis, alternative=1)
+        )
+        shifted = await stub.PlanPickAndStand(
+            grasp_pb2.PickAndStandRequest(center=base.center, axis=base.axis, grasp_offset=0.03)
+        )
     joints = {w.name: list(w.joints) for w in best.waypoints}
     alt_joints = {w.name: list(w.joints) for w in alt.waypoints}
     assert alt_joints["REORIENT"] != pytest.approx(joints["REORIENT"], abs=1e-3)  # another wrist option
@@ -124,5 +141,6 @@ async def test_recovery_hooks_alternative_plan_and_grasp_offset(stub) -> None:  
     g1 = pose_to_matrix(shifted.waypoints[2].pose, "grasp")
     assert abs(abs(g1[0, 3] - g0[0, 3]) - 0.03) < 1e-9 and abs(g1[1, 3] - g0[1, 3]) < 1e-9
     with pytest.raises(InvalidInputError, match="grasp_offset"), rpc_errors():
-        await stub.PlanPickAndStand(grasp_pb2.PickAndStandRequest(center=base.center, axis=base.axis,
-                                                                  grasp_offset=0.5))
+        await stub.PlanPickAndStand(
+            grasp_pb2.PickAndStandRequest(center=base.center, axis=base.axis, grasp_offset=0.5)
+        )

@@ -29,8 +29,19 @@ SPEC = get_robot("nova5")
 T_FLANGE_TOOL = tool_geometry(SETTINGS).T_flange_tool()
 HOME = np.radians(CFG.safe_home_joints_deg["nova5"])
 L, D = 0.200, 0.022
-NAMES = ["SAFE_HOME", "PRE_GRASP", "GRASP", "LIFT", "REORIENT", "CARRY", "PLACE_ABOVE", "PLACE", "RELEASE", "RETRACT",
-         "RETRACT_UP"]
+NAMES = [
+    "SAFE_HOME",
+    "PRE_GRASP",
+    "GRASP",
+    "LIFT",
+    "REORIENT",
+    "CARRY",
+    "PLACE_ABOVE",
+    "PLACE",
+    "RELEASE",
+    "RETRACT",
+    "RETRACT_UP",
+]
 
 
 def random_rods(n: int, seed: int) -> list[RodObservation]:
@@ -76,7 +87,10 @@ def test_plan_has_the_seed_001_waypoints_and_gripper_commands(plans) -> None:  #
         assert actions == [("PRE_GRASP", "open"), ("GRASP", "close"), ("RELEASE", "open")]
         motions = {w.name: w.motion for w in p.waypoints}
         assert motions["SAFE_HOME"] == motions["PRE_GRASP"] == "joint"
-        assert all(motions[n] == "linear" for n in ("GRASP", "LIFT", "REORIENT", "CARRY", "PLACE_ABOVE", "PLACE", "RETRACT"))
+        assert all(
+            motions[n] == "linear"
+            for n in ("GRASP", "LIFT", "REORIENT", "CARRY", "PLACE_ABOVE", "PLACE", "RETRACT")
+        )
         assert motions["RELEASE"] == "hold"  # open at touch height, do not push down
         guarded = [w.name for w in p.waypoints if w.guarded]
         assert guarded == ["PLACE"]
@@ -151,7 +165,9 @@ def test_place_stands_the_rod_base_on_the_table_at_the_place_position(plans) -> 
         back = p.waypoint("RETRACT").T_base_tool[:3, 3] - p.waypoint("PLACE").T_base_tool[:3, 3]
         assert np.allclose(back, -CFG.rod.retreat_m * p.waypoint("PLACE").T_base_tool[:3, 2])
         # ... until the tool tip clears the standing rod's top: the joint move home starts there
-        assert p.waypoint("RETRACT_UP").T_base_tool[2, 3] >= CFG.table_z_m + L + CFG.rod.retract_clear_m - 1e-9
+        assert (
+            p.waypoint("RETRACT_UP").T_base_tool[2, 3] >= CFG.table_z_m + L + CFG.rod.retract_clear_m - 1e-9
+        )
 
 
 def test_an_off_centre_grasp_still_retracts_above_the_standing_rod() -> None:

@@ -51,7 +51,11 @@ def test_lying_rod_best_grasp_is_top_down_centred_and_across_the_axis() -> None:
 
 
 def test_grasps_are_ranked_force_closed_reachable_and_above_the_table() -> None:
-    for obj in (lying_rod(), cube(), ObjectSpec.from_request("sphere", pose(np.eye(3), [0.5, 0.0, 0.03]), 0.06, 0, 0)):
+    for obj in (
+        lying_rod(),
+        cube(),
+        ObjectSpec.from_request("sphere", pose(np.eye(3), [0.5, 0.0, 0.03]), 0.06, 0, 0),
+    ):
         res = run(obj)
         assert res.grasps, res.summary()
         q = [g.quality for g in res.grasps]
@@ -86,7 +90,9 @@ def test_cube_top_grasps_rank_above_side_grasps() -> None:
 
 def test_sphere_needs_soft_fingers_for_force_closure() -> None:
     ball = ObjectSpec.from_request("sphere", pose(np.eye(3), [0.5, 0.0, 0.03]), 0.06, 0, 0)
-    hard = CFG.model_copy(update={"force_closure": CFG.force_closure.model_copy(update={"torsional_friction_m": 0.0})})
+    hard = CFG.model_copy(
+        update={"force_closure": CFG.force_closure.model_copy(update={"torsional_friction_m": 0.0})}
+    )
     res = synthesize(ball, hard, STROKE)
     assert res.grasps == [] and res.rejected["no force closure"] > 0
     assert synthesize(ball, CFG, STROKE).grasps
@@ -119,7 +125,9 @@ def test_width_quality_is_the_lld_score() -> None:
         ("sphere", (0.0, 0.0, 0.0), "width"),
     ],
 )
-def test_bad_object_requests_raise_invalid_input(shape: str, dims: tuple[float, float, float], match: str) -> None:
+def test_bad_object_requests_raise_invalid_input(
+    shape: str, dims: tuple[float, float, float], match: str
+) -> None:
     with pytest.raises(InvalidInputError, match=match):
         ObjectSpec.from_request(shape, np.eye(4), *dims)
 

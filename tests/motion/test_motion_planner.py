@@ -67,11 +67,16 @@ def test_a_move_starting_inside_the_search_clearance_still_plans(arm):
 
     def scene(gap: float, pad: float) -> Scene:
         y0 = tip[1] + gap
-        return Scene(boxes=(Box((tip[0] - 0.1, y0, 0.0), (tip[0] + 0.1, y0 + 0.1, tip[2] + 0.1), "near"),),
-                     padding_m=pad)
+        return Scene(
+            boxes=(Box((tip[0] - 0.1, y0, 0.0), (tip[0] + 0.1, y0 + 0.1, tip[2] + 0.1), "near"),),
+            padding_m=pad,
+        )
 
-    gap = next(g for g in np.arange(0.20, 0.0, -0.0005)
-               if CollisionChecker(arm, scene(g, 0.01 + SEARCH_CLEARANCE_M)).in_collision(Q_PICK))
+    gap = next(
+        g
+        for g in np.arange(0.20, 0.0, -0.0005)
+        if CollisionChecker(arm, scene(g, 0.01 + SEARCH_CLEARANCE_M)).in_collision(Q_PICK)
+    )
     planner = MotionPlanner(arm, scene(gap, 0.01))
     assert not planner.checker.in_collision(Q_PICK)
     goal = Q_PICK - np.deg2rad([20, 0, 0, 0, 0, 0])  # away from the wall side
@@ -251,7 +256,9 @@ print(np.array2string(planner.plan_joints(q0, q1).path, precision=9))
 
 def _plan_in_fresh_process(seed: int) -> str:
     code = _PLAN_IN_A_FRESH_PROCESS.replace("SEED", str(seed))
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True
+    )
     return out.stdout
 
 

@@ -249,7 +249,9 @@ def test_acceleration_peaks_are_exact_between_knots():
     for k in range(len(times) - 1):
         inside = (seg == k) & (dense_t > times[k]) & (dense_t < times[k + 1])
         sampled_max = dense[inside].max(axis=0)
-        assert np.all(sampled_max <= np.maximum(peaks[k], np.maximum(np.abs(acc[k]), np.abs(acc[k + 1]))) + 1e-6)
+        assert np.all(
+            sampled_max <= np.maximum(peaks[k], np.maximum(np.abs(acc[k]), np.abs(acc[k + 1]))) + 1e-6
+        )
         has_peak = peaks[k] > 0
         assert np.all(peaks[k][has_peak] <= sampled_max[has_peak] + 1e-3)
         assert np.all((at[k] >= times[k]) & (at[k] <= times[k + 1]))

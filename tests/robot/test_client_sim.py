@@ -19,8 +19,14 @@ FAST_RECONNECT = ReconnectSettings(max_attempts=3, base_delay_s=0.02, max_delay_
 
 
 def make_client(server, **kw) -> DobotClient:  # type: ignore[no-untyped-def]
-    return DobotClient("127.0.0.1", server.ports["dashboard"], server.ports["feedback"],
-                       request_timeout_s=1.0, reconnect=FAST_RECONNECT, **kw)
+    return DobotClient(
+        "127.0.0.1",
+        server.ports["dashboard"],
+        server.ports["feedback"],
+        request_timeout_s=1.0,
+        reconnect=FAST_RECONNECT,
+        **kw,
+    )
 
 
 async def test_enable_movj_completion(sim_server):
@@ -132,7 +138,9 @@ async def test_server_gone_gives_bounded_clear_error(sim_server):
 
 
 async def test_unreachable_port_fails_fast():
-    c = DobotClient("127.0.0.1", 1, 2, reconnect=ReconnectSettings(max_attempts=2, base_delay_s=0.01, max_delay_s=0.02))
+    c = DobotClient(
+        "127.0.0.1", 1, 2, reconnect=ReconnectSettings(max_attempts=2, base_delay_s=0.01, max_delay_s=0.02)
+    )
     with pytest.raises(RobotCommunicationError, match=r"127\.0\.0\.1:1 after 2 attempts"):
         await c.connect()
     await c.close()
@@ -171,7 +179,9 @@ async def test_feedback_rate_and_slow_port(sim_server):
         steps = await _controller_periods_ms(c, 40)
         assert 7 <= statistics.median(steps) <= 9, str(steps)
         assert c.packets_received - n0 >= 40
-    slow = DobotClient("127.0.0.1", sim_server.ports["dashboard"], sim_server.ports["slow"], feedback_timeout_s=0.5)
+    slow = DobotClient(
+        "127.0.0.1", sim_server.ports["dashboard"], sim_server.ports["slow"], feedback_timeout_s=0.5
+    )
     async with slow:
         steps = await _controller_periods_ms(slow, 4)
         assert 190 <= statistics.median(steps) <= 210, str(steps)

@@ -60,8 +60,9 @@ async def test_workspace_floor_is_enforced(driver, sim_server):
     with pytest.raises(LimitViolationError, match="on z"):
         await driver.move_joints(q_low)
     # and a trajectory that dips below it on the way is refused as a whole
-    traj = quintic_move(driver.joint_positions(), q_low, joint_names=driver.spec.joint_names,
-                        limits=limits(driver.spec))
+    traj = quintic_move(
+        driver.joint_positions(), q_low, joint_names=driver.spec.joint_names, limits=limits(driver.spec)
+    )
     before = sim_server.controller.commands_handled
     with pytest.raises(LimitViolationError, match="trajectory sample"):
         await driver.execute_trajectory(traj)
@@ -70,8 +71,9 @@ async def test_workspace_floor_is_enforced(driver, sim_server):
 
 async def test_execute_trajectory_tracks_and_ends_at_goal(driver):
     goal = np.deg2rad([30, 20, 80, -10, -90, 0])
-    traj = quintic_move(driver.joint_positions(), goal, joint_names=driver.spec.joint_names,
-                        limits=limits(driver.spec))
+    traj = quintic_move(
+        driver.joint_positions(), goal, joint_names=driver.spec.joint_names, limits=limits(driver.spec)
+    )
     res = await driver.execute_trajectory(traj)
     assert np.allclose(res.final_q, goal, atol=1e-6)
     assert res.duration_s >= traj.duration * 0.9
@@ -79,12 +81,17 @@ async def test_execute_trajectory_tracks_and_ends_at_goal(driver):
 
 async def test_trajectory_start_mismatch_and_overspeed_rejected(driver, sim_server):
     before = sim_server.controller.commands_handled
-    far = quintic_move(np.deg2rad([40, 0, 90, 0, -90, 0]), HOME, joint_names=driver.spec.joint_names,
-                       limits=limits(driver.spec))
+    far = quintic_move(
+        np.deg2rad([40, 0, 90, 0, -90, 0]),
+        HOME,
+        joint_names=driver.spec.joint_names,
+        limits=limits(driver.spec),
+    )
     with pytest.raises(InvalidInputError, match="away from the measured joints"):
         await driver.execute_trajectory(far)
-    fast = quintic_move(HOME, np.deg2rad([90, 0, 90, 0, -90, 0]), joint_names=driver.spec.joint_names,
-                        duration_s=0.2)
+    fast = quintic_move(
+        HOME, np.deg2rad([90, 0, 90, 0, -90, 0]), joint_names=driver.spec.joint_names, duration_s=0.2
+    )
     with pytest.raises(LimitViolationError, match="°/s"):
         await driver.execute_trajectory(fast)
     wrong = quintic_move(HOME, HOME, joint_names=[f"j{i}" for i in range(6)], duration_s=1.0)
@@ -122,8 +129,12 @@ async def test_guarded_move_stops_on_condition(driver):
 
 
 async def test_estop_during_trajectory(driver):
-    traj = quintic_move(driver.joint_positions(), np.deg2rad([-90, 0, 90, 0, -90, 0]),
-                        joint_names=driver.spec.joint_names, duration_s=4.0)
+    traj = quintic_move(
+        driver.joint_positions(),
+        np.deg2rad([-90, 0, 90, 0, -90, 0]),
+        joint_names=driver.spec.joint_names,
+        duration_s=4.0,
+    )
     task = asyncio.create_task(driver.execute_trajectory(traj))
     await driver.client.wait_feedback(lambda fb: fb.q[0] < np.deg2rad(-5), 5.0)
     await driver.emergency_stop()

@@ -14,11 +14,16 @@ def test_command_encoding_matches_sdk_formats():
     assert P.mov_l_pose([1, 2, 3, 4, 5, 6], speed=200, v=20).startswith("MovL(pose={1.000000,")
     assert "speed=200" in P.mov_l_pose([1, 2, 3, 4, 5, 6], speed=200, v=20)
     assert "v=" not in P.mov_l_pose([1, 2, 3, 4, 5, 6], speed=200, v=20)  # speed wins over v
-    assert P.servo_j([0] * 6, t_s=0.03) == "ServoJ(0.000000,0.000000,0.000000,0.000000,0.000000,0.000000,t=0.030000)"
+    assert (
+        P.servo_j([0] * 6, t_s=0.03)
+        == "ServoJ(0.000000,0.000000,0.000000,0.000000,0.000000,0.000000,t=0.030000)"
+    )
     assert P.digital_output(1, True) == "DO(1,1)"
     assert P.digital_output(2, False, tool=True) == "ToolDO(2,0)"
     assert P.emergency_stop(True) == "EmergencyStop(1)"
-    assert P.inverse_kin([1, 2, 3, 4, 5, 6], [0] * 6).endswith(",useJointNear=1,jointNear={0.000000,0.000000,0.000000,0.000000,0.000000,0.000000})")
+    assert P.inverse_kin([1, 2, 3, 4, 5, 6], [0] * 6).endswith(
+        ",useJointNear=1,jointNear={0.000000,0.000000,0.000000,0.000000,0.000000,0.000000})"
+    )
     with pytest.raises(ValueError):
         P.mov_j_joint([0] * 6, v=50.5)  # ratios are integers, as in the SDK
     with pytest.raises(ValueError):

@@ -59,8 +59,9 @@ async def test_stream_rate_limit(stub):
 
 
 async def test_second_zenoh_session_receives_joint_states(service, robot_settings):
-    zs = robot_settings.zenoh.model_copy(update={"listen": [f"tcp/127.0.0.1:{free_port()}"],
-                                                 "connect": robot_settings.zenoh.listen})
+    zs = robot_settings.zenoh.model_copy(
+        update={"listen": [f"tcp/127.0.0.1:{free_port()}"], "connect": robot_settings.zenoh.listen}
+    )
     async with Bus(zs) as bus:
         sub = bus.subscribe(CellKeys(robot_settings.cell_id).joint_states, common_pb2.JointState)
         try:
@@ -102,8 +103,11 @@ async def test_errors_cross_grpc_with_their_type(stub):
 async def test_estop_over_grpc_during_move(stub, service):
     await stub.Enable(robot_pb2.EnableRequest())
     move = asyncio.ensure_future(
-        stub.MoveJoints(robot_pb2.MoveJointsRequest(positions=np.deg2rad([150, 0, 90, 0, -90, 0]).tolist(),
-                                                    speed_ratio=10))
+        stub.MoveJoints(
+            robot_pb2.MoveJointsRequest(
+                positions=np.deg2rad([150, 0, 90, 0, -90, 0]).tolist(), speed_ratio=10
+            )
+        )
     )
     await service.driver.client.wait_feedback(lambda fb: fb.q[0] > np.deg2rad(3), 5.0)
     r = await stub.EmergencyStop(robot_pb2.EmergencyStopRequest())
@@ -125,9 +129,11 @@ async def test_execute_grasp_lld_13_2(stub, service):
     q_grasp = np.deg2rad([180.0, 30.0, 100.0, -40.0, -90.0, 0.0])
     T_grasp = analytic.fk(drv.spec, q_grasp, drv.limits.T_flange_tool)
     assert T_grasp[2, 3] > 0.05  # a reachable grasp pose above the table
-    r = await stub.ExecuteGrasp(robot_pb2.ExecuteGraspRequest(grasp_pose=matrix_to_pose(T_grasp),
-                                                              approach_distance=0.08, lift_distance=0.05,
-                                                              speed_scale=1.0))
+    r = await stub.ExecuteGrasp(
+        robot_pb2.ExecuteGraspRequest(
+            grasp_pose=matrix_to_pose(T_grasp), approach_distance=0.08, lift_distance=0.05, speed_scale=1.0
+        )
+    )
     assert r.success and r.closed and drv.gripper.state().closed
     T_end = analytic.fk(drv.spec, drv.joint_positions(), drv.limits.T_flange_tool)
     assert np.allclose(T_end[:3, 3], T_grasp[:3, 3] + [0, 0, 0.05], atol=1e-3)  # lifted straight up

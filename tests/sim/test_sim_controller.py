@@ -172,7 +172,10 @@ def test_servoj_overspeed_alarms(ctrl):
 
 def test_inverse_and_positive_kin(ctrl):
     pose = reply(ctrl, "PositiveKin(10,20,30,40,50,60)").floats()
-    q = reply(ctrl, "InverseKin(" + ",".join(f"{v:f}" for v in pose) + ",useJointNear=1,jointNear={10,20,30,40,50,60})")
+    q = reply(
+        ctrl,
+        "InverseKin(" + ",".join(f"{v:f}" for v in pose) + ",useJointNear=1,jointNear={10,20,30,40,50,60})",
+    )
     assert np.allclose(q.floats(), [10, 20, 30, 40, 50, 60], atol=1e-6)
 
 

@@ -14,8 +14,12 @@ def cell_settings(tmp_path, **overrides) -> Settings:  # type: ignore[no-untyped
         "zenoh": {"listen": [f"tcp/127.0.0.1:{free_port()}"]},
         "grpc": {"robot_port": 0, "motion_port": 0, "grasp_port": 0, "vision_port": 0, "task_port": 0},
         # the arm starts at the safe home, where every cycle starts (INIT moves it there otherwise)
-        "sim": {"dashboard_port": 0, "feedback_port": 0, "slow_feedback_port": 0,
-                "twin": {"initial_joints_deg": [180.0, 0.0, 90.0, 0.0, -90.0, 0.0]}},
+        "sim": {
+            "dashboard_port": 0,
+            "feedback_port": 0,
+            "slow_feedback_port": 0,
+            "twin": {"initial_joints_deg": [180.0, 0.0, 90.0, 0.0, -90.0, 0.0]},
+        },
         "task": {"detect_retry_delay_s": 0.05, "reset_scene_each_cycle": False},
     }
     return load_settings("sim", overrides=deep_merge(base, overrides))

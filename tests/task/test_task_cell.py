@@ -27,8 +27,9 @@ pytestmark = [pytest.mark.integration, pytest.mark.slow]
 async def test_full_pick_and_stand_through_all_services(task_settings):
     async with Cell(task_settings, seed=3) as cell:
         keys = CellKeys(cell.settings.cell_id)
-        zs = cell.settings.zenoh.model_copy(update={"listen": [f"tcp/127.0.0.1:{free_port()}"],
-                                                    "connect": cell.settings.zenoh.listen})
+        zs = cell.settings.zenoh.model_copy(
+            update={"listen": [f"tcp/127.0.0.1:{free_port()}"], "connect": cell.settings.zenoh.listen}
+        )
         async with Bus(zs) as watcher:
             picks = watcher.subscribe(keys.pick_events, task_pb2.PickEvent)
             statuses = watcher.subscribe(keys.task_status, task_pb2.TaskStatus)
@@ -45,7 +46,9 @@ async def test_full_pick_and_stand_through_all_services(task_settings):
         standing = gt.check_rod_standing(cell.engine)
         assert standing.success, standing.reasons
         assert event.pick_id == outcome.pick_id and event.success and event.object_class == "rod"
-        assert {"DETECT", "PLAN", "GRASP", "LIFT", "REORIENT", "PLACE", "RELEASE"} <= set(event.stage_durations_s)
+        assert {"DETECT", "PLAN", "GRASP", "LIFT", "REORIENT", "PLACE", "RELEASE"} <= set(
+            event.stage_durations_s
+        )
         assert {"GRASP", "REORIENT", "PLACE", "DONE"} <= seen_states
         # the camera saw the rod where it was: the placed rod is where the plan put it
         rod = gt.object_pose(cell.engine, "rod")
@@ -75,7 +78,9 @@ class _FarVision:
     """The real pipeline's answer replaced by a rod 1.5 m away (beyond the Nova5's reach)."""
 
     async def observe(self) -> Observation:
-        return Observation(rods=(SeenRod(np.array([1.5, 0.0, 0.011]), np.array([1.0, 0.0, 0.0]), 0.2, 0.022, 0.9),))
+        return Observation(
+            rods=(SeenRod(np.array([1.5, 0.0, 0.011]), np.array([1.0, 0.0, 0.0]), 0.2, 0.022, 0.9),)
+        )
 
 
 async def test_unreachable_rod_is_a_planning_error_and_nothing_moves(task_settings):
@@ -102,8 +107,10 @@ async def test_slipping_grasp_is_detected_and_regrasped(tmp_path, caplog):
             outcome = await orch.run("stand-rod")
         assert not outcome.success
         # the first grasp: lifted, verification failed, the cycle backed off and looked again
-        assert any("grasp verification after LIFT" in r.getMessage() and r.getMessage().endswith("→ regrasp")
-                   for r in caplog.records), [r.getMessage() for r in caplog.records]
+        assert any(
+            "grasp verification after LIFT" in r.getMessage() and r.getMessage().endswith("→ regrasp")
+            for r in caplog.records
+        ), [r.getMessage() for r in caplog.records]
         first_grasp = states.index(CycleState.GRASP)
         assert CycleState.DETECT in states[first_grasp:]
         # where the dropped rod comes to rest varies from run to run: it is grasped again (and slips
@@ -111,7 +118,10 @@ async def test_slipping_grasp_is_detected_and_regrasped(tmp_path, caplog):
         if states.count(CycleState.GRASP) == 2:
             assert outcome.error_code == "GraspFailureError"
         else:
-            assert states.count(CycleState.GRASP) == 1 and outcome.error_code in ("CollisionError", "IKFailureError")
+            assert states.count(CycleState.GRASP) == 1 and outcome.error_code in (
+                "CollisionError",
+                "IKFailureError",
+            )
         assert CycleState.REORIENT not in states  # never carried on with an empty gripper
         assert not gt.robot_touches(cell.engine, "rod") or not cell.engine.gripper_closed
 

@@ -52,13 +52,18 @@ def jitter(T: np.ndarray, rng: np.random.Generator, sigma_m: float, sigma_deg: f
 def synthetic_views(seed: int, n: int, cam_noise=(0.0, 0.0), robot_noise=(0.0, 0.0)):
     """Robot poses and board poses consistent with a known camera and board mount (+ optional noise)."""
     rng = np.random.default_rng(seed)
-    X = look_at_camera(np.array([0.45, 0.0, 0.0]), rng.uniform(0.7, 0.9), rng.uniform(50, 60), rng.uniform(-10, 10))
-    Y = make_transform(Rotation.from_euler("xyz", rng.uniform(-20, 20, 3), degrees=True).as_matrix(),
-                       rng.uniform(-0.05, 0.05, 3))
+    X = look_at_camera(
+        np.array([0.45, 0.0, 0.0]), rng.uniform(0.7, 0.9), rng.uniform(50, 60), rng.uniform(-10, 10)
+    )
+    Y = make_transform(
+        Rotation.from_euler("xyz", rng.uniform(-20, 20, 3), degrees=True).as_matrix(),
+        rng.uniform(-0.05, 0.05, 3),
+    )
     G, C = [], []
     for _ in range(n):
-        R = Rotation.from_euler("xyz", [180 + rng.uniform(-30, 30), rng.uniform(-30, 30), rng.uniform(-60, 60)],
-                                degrees=True).as_matrix()
+        R = Rotation.from_euler(
+            "xyz", [180 + rng.uniform(-30, 30), rng.uniform(-30, 30), rng.uniform(-60, 60)], degrees=True
+        ).as_matrix()
         g = make_transform(R, rng.uniform([0.3, -0.2, 0.1], [0.55, 0.2, 0.3]))
         c = invert_transform(X) @ g @ Y
         G.append(jitter(g, rng, *robot_noise))
@@ -120,8 +125,10 @@ def test_a_board_mounted_face_out_at_180_degrees_is_recovered_by_the_refinement(
 
 def test_degenerate_and_mismatched_inputs_are_rejected():
     X, Y, G, C = synthetic_views(1, 6)
-    same_axis = [make_transform(Rotation.from_euler("z", a, degrees=True).as_matrix(), [0.4, 0.0, 0.2])
-                 for a in (0, 20, 40, 60)]
+    same_axis = [
+        make_transform(Rotation.from_euler("z", a, degrees=True).as_matrix(), [0.4, 0.0, 0.2])
+        for a in (0, 20, 40, 60)
+    ]
     with pytest.raises(VisionError, match="two different axes"):
         solve_eye_to_hand(same_axis, [invert_transform(X) @ g @ Y for g in same_axis])
     with pytest.raises(InvalidInputError, match="one board observation per robot pose"):
@@ -140,15 +147,18 @@ def test_calibration_file_round_trip(tmp_path):
     _, _, G, C = synthetic_views(2, 10)
     result = solve_eye_to_hand(G, C)
     stamp = dt.datetime(2026, 1, 2, 3, 4, 5, tzinfo=dt.UTC)
-    path = write_calibration(tmp_path / "cfg" / "calibration.yaml", calibration_record(
-        result.T_base_camera, method=result.method, timestamp=stamp, result=result))
+    path = write_calibration(
+        tmp_path / "cfg" / "calibration.yaml",
+        calibration_record(result.T_base_camera, method=result.method, timestamp=stamp, result=result),
+    )
     loaded = read_calibration(path)
     np.testing.assert_allclose(loaded.T_base_camera, result.T_base_camera, atol=1e-12)
     assert loaded.timestamp == stamp and loaded.method == result.method
     raw = yaml.safe_load(path.read_text())
     assert raw["n_poses"] == 10 and "translation_rms_m" in raw["residuals"]
-    np.testing.assert_allclose(Rotation.from_quat(raw["quaternion_xyzw"]).as_matrix(), result.T_base_camera[:3, :3],
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        Rotation.from_quat(raw["quaternion_xyzw"]).as_matrix(), result.T_base_camera[:3, :3], atol=1e-9
+    )
 
 
 def test_bad_calibration_files_say_what_is_wrong(tmp_path):
@@ -183,8 +193,11 @@ def test_board_pose_from_a_rendered_view():
     rng = np.random.default_rng(5)
     for k in range(4):
         R = Rotation.from_euler("xyz", rng.uniform(-35, 35, 3), degrees=True).as_matrix()
-        T = make_transform(R, np.array([rng.uniform(-0.1, 0.1), rng.uniform(-0.05, 0.05), rng.uniform(0.5, 0.8)])
-                           - R @ target.center_board)
+        T = make_transform(
+            R,
+            np.array([rng.uniform(-0.1, 0.1), rng.uniform(-0.05, 0.05), rng.uniform(0.5, 0.8)])
+            - R @ target.center_board,
+        )
         view = render_planar_target(target.image(100), target.size_m, T, intr, seed=k)
         obs = target.detect(view, intr)
         assert obs is not None and len(obs.ids) >= 20
@@ -225,8 +238,15 @@ class BoardCamera:
     def capture(self) -> RGBDFrame:
         self.n += 1
         T_cb = invert_transform(self.X) @ self.robot.T @ self.Y
-        grey = render_planar_target(self.board_image, self.target.size_m, T_cb, self.intrinsics, seed=self.n,
-                                    noise_sigma=3.0, blur_sigma=0.8)
+        grey = render_planar_target(
+            self.board_image,
+            self.target.size_m,
+            T_cb,
+            self.intrinsics,
+            seed=self.n,
+            noise_sigma=3.0,
+            blur_sigma=0.8,
+        )
         depth = np.full(grey.shape, 700, np.uint16)
         return RGBDFrame(np.repeat(grey[..., None], 3, axis=2), depth, self.intrinsics, seq=self.n)
 
@@ -239,8 +259,12 @@ def test_end_to_end_calibration_run_recovers_the_true_camera(tmp_path, seed):
     rng = np.random.default_rng(seed)
     settings = CalibrationSettings()
     target = CharucoTarget(settings.board)
-    X = look_at_camera(np.array([0.45, rng.uniform(-0.05, 0.05), 0.0]), rng.uniform(0.75, 0.9),
-                       rng.uniform(50, 60), rng.uniform(-10, 10))
+    X = look_at_camera(
+        np.array([0.45, rng.uniform(-0.05, 0.05), 0.0]),
+        rng.uniform(0.75, 0.9),
+        rng.uniform(50, 60),
+        rng.uniform(-10, 10),
+    )
     # the board sits on the flange a little differently from the guess
     Y = default_T_gripper_board(target) @ jitter(np.eye(4), rng, 0.01, 5.0)
     robot = FakeRobot(rng, refuse=4)
@@ -248,8 +272,9 @@ def test_end_to_end_calibration_run_recovers_the_true_camera(tmp_path, seed):
     X_guess = X @ make_transform(Rotation.from_euler("z", 3, degrees=True).as_matrix(), [0.03, -0.02, 0.02])
     progress: list[tuple[int, int, str]] = []
     out = tmp_path / "calibration.yaml"
-    result, data = asyncio.run(run_calibration(robot, camera, settings, X_guess, out,
-                                               lambda *a: progress.append(a), seed=seed))
+    result, data = asyncio.run(
+        run_calibration(robot, camera, settings, X_guess, out, lambda *a: progress.append(a), seed=seed)
+    )
     dt_m, dr = pose_error(result.T_base_camera, X)
     assert dt_m <= TRANS_TOL_M and dr <= ROT_TOL_DEG, (dt_m, dr)
     assert result.reprojection_rms_px is not None and result.reprojection_rms_px < 1.5
@@ -260,11 +285,19 @@ def test_end_to_end_calibration_run_recovers_the_true_camera(tmp_path, seed):
     np.testing.assert_allclose(saved.T_base_camera, result.T_base_camera)
     assert (dt.datetime.now(dt.UTC) - saved.timestamp).total_seconds() < 60
     # the quick check agrees with the calibration it just made
-    poses = generate_calibration_poses(4, settings, result.T_base_camera, result.T_gripper_board,
-                                       target.outline, np.random.default_rng(99), camera.intrinsics)
+    poses = generate_calibration_poses(
+        4,
+        settings,
+        result.T_base_camera,
+        result.T_gripper_board,
+        target.outline,
+        np.random.default_rng(99),
+        camera.intrinsics,
+    )
     robot.refuse = None
-    report = asyncio.run(check_calibration(robot, camera, settings, result.T_base_camera,
-                                           result.T_gripper_board, poses))
+    report = asyncio.run(
+        check_calibration(robot, camera, settings, result.T_base_camera, result.T_gripper_board, poses)
+    )
     assert report.ok, report.message
 
 

@@ -47,32 +47,39 @@ async def test_calibration_in_the_twin_recovers_the_true_camera_pose(tmp_path) -
     assert s.sim.twin.calibration_board and s.sim.twin.camera.noise
     X_true = ground_truth.T_base_camera(s.sim.twin.camera)
     # The operator's rough guess (a few cm, a few degrees off): it only aims the board.
-    X_guess = X_true @ make_transform(Rotation.from_euler("xyz", [2.0, -3.0, 2.0], degrees=True).as_matrix(),
-                                      [0.03, -0.02, 0.04])
+    X_guess = X_true @ make_transform(
+        Rotation.from_euler("xyz", [2.0, -3.0, 2.0], degrees=True).as_matrix(), [0.03, -0.02, 0.04]
+    )
     out = tmp_path / "calibration.yaml"
-    server = build_sim_server(s, "twin", q0_deg=CALIBRATION_READY_DEG,
-                              ports={"dashboard": 0, "feedback": 0, "slow": 0})
+    server = build_sim_server(
+        s, "twin", q0_deg=CALIBRATION_READY_DEG, ports={"dashboard": 0, "feedback": 0, "slow": 0}
+    )
     async with server:
-        robot_settings = s.robot.model_copy(update={"dashboard_port": server.ports["dashboard"],
-                                                    "feedback_port": server.ports["feedback"]})
+        robot_settings = s.robot.model_copy(
+            update={"dashboard_port": server.ports["dashboard"], "feedback_port": server.ports["feedback"]}
+        )
         s = s.model_copy(update={"robot": robot_settings})
         camera = TwinCamera(server.controller.engine, seed=3)
         try:
             async with RobotService(s, bus=None, grpc_port=0) as svc:
                 await svc.driver.enable()
                 grpc = s.grpc.model_copy(update={"robot_port": svc.grpc_port})
-                async with GrpcCalibrationRobot(s.model_copy(update={"grpc": grpc}), speed_ratio=100,
-                                                settle_s=0.1) as robot:
-                    result, data = await run_calibration(robot, camera, s.vision.calibration, X_guess, out,
-                                                         seed=0)
+                async with GrpcCalibrationRobot(
+                    s.model_copy(update={"grpc": grpc}), speed_ratio=100, settle_s=0.1
+                ) as robot:
+                    result, data = await run_calibration(
+                        robot, camera, s.vision.calibration, X_guess, out, seed=0
+                    )
         finally:
             camera.close()
 
     assert camera.noise  # the views were noisy, as configured
     assert len(data.observations) >= 8, data.skipped
     dt_m, dr = pose_error(result.T_base_camera, X_true)
-    print(f"twin calibration: {len(data.observations)} views, error {dt_m * 1e3:.2f} mm, {dr:.3f} deg; "
-          f"skipped {data.skipped}")
+    print(
+        f"twin calibration: {len(data.observations)} views, error {dt_m * 1e3:.2f} mm, {dr:.3f} deg; "
+        f"skipped {data.skipped}"
+    )
     assert dt_m <= TRANS_TOL_M and dr <= ROT_TOL_DEG, (dt_m, dr)
     # The board mount is estimated too, and matches the twin's.
     dy_m, dy_deg = pose_error(result.T_gripper_board, board_mount(s.vision.calibration.board, s.gripper))
@@ -92,8 +99,22 @@ def test_calibrate_cli_with_the_twin_source_writes_the_true_pose(tmp_path, monke
     monkeypatch.setenv("PICKPLACE_SIM__SPEED", "3")
     monkeypatch.setenv("PICKPLACE_ROBOT__SPEED_RATIO", "100")
     out = tmp_path / "calibration.yaml"
-    result = CliRunner().invoke(app, ["calibrate", "--profile", "sim", "--source", "twin", "--poses", "8",
-                                      "--speed", "100", "--out", str(out)])
+    result = CliRunner().invoke(
+        app,
+        [
+            "calibrate",
+            "--profile",
+            "sim",
+            "--source",
+            "twin",
+            "--poses",
+            "8",
+            "--speed",
+            "100",
+            "--out",
+            str(out),
+        ],
+    )
     assert result.exit_code == 0, result.output
     X_true = ground_truth.T_base_camera(load_settings("sim").sim.twin.camera)
     dt_m, dr = pose_error(read_calibration(out).T_base_camera, X_true)

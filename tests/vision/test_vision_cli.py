@@ -31,7 +31,9 @@ def calibration_file(tmp_path, monkeypatch):  # type: ignore[no-untyped-def]
 
 
 def test_calibrate_manual_writes_a_validated_file(calibration_file):
-    result = runner.invoke(app, ["calibrate-manual", "--xyz", "0.9", "0.0", "0.65", "--rpy", "-145", "0", "90"])
+    result = runner.invoke(
+        app, ["calibrate-manual", "--xyz", "0.9", "0.0", "0.65", "--rpy", "-145", "0", "90"]
+    )
     assert result.exit_code == 0, result.output
     saved = read_calibration(calibration_file)
     np.testing.assert_allclose(saved.T_base_camera[:3, 3], [0.9, 0.0, 0.65])
@@ -58,7 +60,12 @@ def test_vision_detect_on_a_recording(tmp_path, calibration_file):
     from scipy.spatial.transform import Rotation
 
     rpy = Rotation.from_matrix(T[:3, :3]).as_euler("xyz", degrees=True)
-    assert runner.invoke(app, ["calibrate-manual", "--xyz", *map(str, T[:3, 3]), "--rpy", *map(str, rpy)]).exit_code == 0
+    assert (
+        runner.invoke(
+            app, ["calibrate-manual", "--xyz", *map(str, T[:3, 3]), "--rpy", *map(str, rpy)]
+        ).exit_code
+        == 0
+    )
     overlay = tmp_path / "o.jpg"
     result = runner.invoke(app, ["vision-detect", str(tmp_path / "rec"), "--overlay", str(overlay)])
     assert result.exit_code == 0, result.output

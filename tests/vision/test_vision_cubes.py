@@ -32,7 +32,9 @@ def test_cubes_and_obstacle_over_50_noisy_scenes():
         assert len(result.obstacles) == len(scene.obstacles), f"seed {seed}: {result.notes}"
         for box, truth in zip(result.obstacles, scene.obstacles, strict=True):
             assert np.all(box.contains(truth.corners())), f"seed {seed}: obstacle box misses a corner"
-            assert np.all(box.max_base - box.min_base < np.asarray(truth.size).max() * 1.5 + 0.05)  # and is tight
+            assert np.all(
+                box.max_base - box.min_base < np.asarray(truth.size).max() * 1.5 + 0.05
+            )  # and is tight
             assert box.min_base[2] <= 0.0 + 1e-3  # it stands on the table
         if scene.rods:
             assert len(result.rods) == 1  # the rod is not mistaken for a cube or obstacle
@@ -68,12 +70,15 @@ def test_colour_classification_of_grey_and_odd_hues():
 def test_obstacle_rule_is_configurable():
     scene = random_scene(5, cube_colors=("red",), obstacle=True)
     frame = render_scene(scene, seed=5).frame
-    strict = VisionSettings(cubes=CubeDetectionSettings(obstacle=ObstacleRuleSettings(require="points",
-                                                                                      min_points=10**7)))
+    strict = VisionSettings(
+        cubes=CubeDetectionSettings(obstacle=ObstacleRuleSettings(require="points", min_points=10**7))
+    )
     result = VisionPipeline(strict).detect(frame, scene.T_base_camera)
     assert result.obstacles == ()
     assert any("neither a cube nor the obstacle" in n for n in result.notes)
-    red = VisionSettings(cubes=CubeDetectionSettings(obstacle=ObstacleRuleSettings(color="red", min_extent_m=0.04)))
+    red = VisionSettings(
+        cubes=CubeDetectionSettings(obstacle=ObstacleRuleSettings(color="red", min_extent_m=0.04))
+    )
     result = VisionPipeline(red).detect(frame, scene.T_base_camera)
     assert [o.color_label for o in result.obstacles] == ["red"]  # the red cube now counts as an obstacle
     assert result.cubes == ()

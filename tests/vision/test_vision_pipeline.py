@@ -33,8 +33,15 @@ def _bad(frame: RGBDFrame, **changes) -> RGBDFrame:
         (lambda f: _bad(f, color=f.color.astype(np.float32)), "colour image"),
         (lambda f: _bad(f, depth=f.depth[:100]), "depth image must be"),
         (lambda f: _bad(f, depth=np.zeros_like(f.depth)), "no valid pixels"),
-        (lambda f: _bad(f, depth=np.where(np.arange(f.depth.size).reshape(f.depth.shape) % 100 == 0,
-                                          f.depth, 0).astype(np.uint16)), "valid"),
+        (
+            lambda f: _bad(
+                f,
+                depth=np.where(np.arange(f.depth.size).reshape(f.depth.shape) % 100 == 0, f.depth, 0).astype(
+                    np.uint16
+                ),
+            ),
+            "valid",
+        ),
         (lambda f: _bad(f, intrinsics=dataclasses.replace(f.intrinsics, fx=float("nan"))), "intrinsics"),
         (lambda f: _bad(f, intrinsics=dataclasses.replace(f.intrinsics, fy=-1.0)), "intrinsics"),
         (lambda f: _bad(f, depth_scale=float("nan")), "depth_scale"),
@@ -82,7 +89,9 @@ def test_detection_is_deterministic_and_timed(scene_and_frame):
 def test_stages_can_be_switched_off(scene_and_frame):
     scene, frame = scene_and_frame
     only_rods = VisionPipeline(VisionSettings(detect_cubes=False)).detect(frame, scene.T_base_camera)
-    assert only_rods.cubes == () and len(only_rods.rods) == 1 and "cube_segmentation" not in only_rods.timings_ms
+    assert (
+        only_rods.cubes == () and len(only_rods.rods) == 1 and "cube_segmentation" not in only_rods.timings_ms
+    )
     only_cubes = VisionPipeline(VisionSettings(detect_rods=False)).detect(frame, scene.T_base_camera)
     assert only_cubes.rods == () and len(only_cubes.cubes) == 2 and "rod_pose" not in only_cubes.timings_ms
 
@@ -94,7 +103,9 @@ def test_overlay_is_a_decodable_jpeg_with_the_detections_drawn(scene_and_frame):
     plain = cv2.cvtColor(frame.color, cv2.COLOR_RGB2BGR)
     assert drawn.shape == plain.shape
     u, v = np.rint(result.rods[0].endpoints_px.mean(axis=0)).astype(int)
-    assert np.any(drawn[v - 3 : v + 4, u - 3 : u + 4] != plain[v - 3 : v + 4, u - 3 : u + 4])  # the rod marker
+    assert np.any(
+        drawn[v - 3 : v + 4, u - 3 : u + 4] != plain[v - 3 : v + 4, u - 3 : u + 4]
+    )  # the rod marker
     jpeg = overlay_jpeg(frame.color, result, quality=70)
     assert jpeg[:2] == b"\xff\xd8"
     decoded = cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)
@@ -135,6 +146,8 @@ def test_renderer_is_seeded_and_noise_makes_holes_on_the_rod():
 
 def test_depth_outside_the_working_range_is_a_clear_error():
     intr = CameraIntrinsics(width=64, height=48, fx=60.0, fy=60.0, cx=32.0, cy=24.0)
-    frame = RGBDFrame(color=np.zeros((48, 64, 3), np.uint8), depth=np.full((48, 64), 5000, np.uint16), intrinsics=intr)
+    frame = RGBDFrame(
+        color=np.zeros((48, 64, 3), np.uint8), depth=np.full((48, 64), 5000, np.uint16), intrinsics=intr
+    )
     with pytest.raises(VisionError, match="no depth between"):
         VisionPipeline().detect(frame)

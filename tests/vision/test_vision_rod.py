@@ -38,7 +38,9 @@ def test_rod_pose_accuracy_over_50_noisy_scenes():
     pipe = VisionPipeline(VisionSettings(detect_cubes=False))
     centre, axis, dist, methods = [], [], [], []
     for seed in range(N_SCENES):
-        scene = random_scene(seed, n_rods=1, cube_colors=("black",) if seed % 2 else (), dark_mat=seed % 3 == 0)
+        scene = random_scene(
+            seed, n_rods=1, cube_colors=("black",) if seed % 2 else (), dark_mat=seed % 3 == 0
+        )
         frame = render_scene(scene, NoiseModel(), seed=seed).frame
         result = pipe.detect(frame, scene.T_base_camera)
         assert len(result.rods) == 1, f"seed {seed}: {len(result.rods)} rods, notes {result.notes}"
@@ -102,8 +104,13 @@ def _fixed_scene(rods=(), boxes=(), dark=False) -> SyntheticScene:
     from services.vision.synthetic import DARK_MAT_RGB, LIGHT_TABLE_RGB
 
     T = look_at_camera(np.array([0.45, 0.0, 0.0]), 0.7, 55.0)
-    return SyntheticScene(T_base_camera=T, intrinsics=d435_intrinsics(), rods=tuple(rods), boxes=tuple(boxes),
-                          table_rgb=DARK_MAT_RGB if dark else LIGHT_TABLE_RGB)
+    return SyntheticScene(
+        T_base_camera=T,
+        intrinsics=d435_intrinsics(),
+        rods=tuple(rods),
+        boxes=tuple(boxes),
+        table_rgb=DARK_MAT_RGB if dark else LIGHT_TABLE_RGB,
+    )
 
 
 def test_wrong_size_dark_bar_is_rejected_with_a_reason():
@@ -121,7 +128,8 @@ def test_flat_dark_stripe_and_black_cube_are_not_rods():
     tape = BoxSpec(center=(0.45, -0.05, 0.0005), size=(0.2, 0.022, 0.001), yaw=0.3, color="black")
     cube = BoxSpec(center=(0.40, 0.10, 0.025), size=(0.05, 0.05, 0.05), yaw=0.5, color="black")
     result = VisionPipeline(VisionSettings(detect_cubes=False)).detect(
-        render_scene(_fixed_scene(boxes=[tape, cube]), seed=2).frame)
+        render_scene(_fixed_scene(boxes=[tape, cube]), seed=2).frame
+    )
     assert result.rods == ()
     assert any("lies flat" in n for n in result.notes), result.notes
 

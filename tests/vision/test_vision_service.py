@@ -56,8 +56,12 @@ async def test_detect_over_grpc_in_camera_and_base_frames(settings):
     cam = SceneCamera(31)
     T = cam.scene.T_base_camera
     metrics = CellMetrics(CollectorRegistry())
-    async with VisionService(settings, None, cam, grpc_port=0, metrics=metrics, T_base_camera=T,
-                             publish_loop=False) as svc, channel("127.0.0.1", svc.grpc_port) as ch:
+    async with (
+        VisionService(
+            settings, None, cam, grpc_port=0, metrics=metrics, T_base_camera=T, publish_loop=False
+        ) as svc,
+        channel("127.0.0.1", svc.grpc_port) as ch,
+    ):
         stub = vision_pb2_grpc.VisionStub(ch)
         with pytest.raises(ObjectNotDetectedError, match="no frame has been processed"), rpc_errors():
             await stub.GetDebugImage(vision_pb2.DebugImageRequest())
@@ -95,7 +99,9 @@ async def test_detect_over_grpc_in_camera_and_base_frames(settings):
         with pytest.raises(InvalidFrameError, match="no valid pixels"), rpc_errors():
             await stub.Detect(vision_pb2.DetectRequest(frame=zero))
 
-    samples = {(s.labels.get("stage"), s.name): s.value for m in metrics.registry.collect() for s in m.samples}
+    samples = {
+        (s.labels.get("stage"), s.name): s.value for m in metrics.registry.collect() for s in m.samples
+    }
     for stage in ("capture", "segmentation", "pose", "total"):
         assert samples[(stage, "vision_latency_seconds_count")] >= 2
 
@@ -106,8 +112,14 @@ async def test_publishes_detections_from_the_zenoh_frame_stream(settings):
     async with Bus(settings.zenoh) as bus:
         objects = bus.subscribe(keys.detected_objects, vision_pb2.DetectedObjects)
         images = bus.subscribe(keys.vision_debug_image, vision_pb2.DebugImage)
-        svc = VisionService(settings, bus, None, grpc_port=0, metrics=CellMetrics(CollectorRegistry()),
-                            T_base_camera=cam.scene.T_base_camera)
+        svc = VisionService(
+            settings,
+            bus,
+            None,
+            grpc_port=0,
+            metrics=CellMetrics(CollectorRegistry()),
+            T_base_camera=cam.scene.T_base_camera,
+        )
         stop = asyncio.Event()
         async with svc:
             feeder = asyncio.create_task(publish_camera_frames(cam, bus, keys.camera_frames, 5.0, stop))
@@ -123,8 +135,12 @@ async def test_publishes_detections_from_the_zenoh_frame_stream(settings):
 
 
 async def test_without_a_frame_source_detect_says_so(settings):
-    async with VisionService(settings, None, None, grpc_port=0, metrics=CellMetrics(CollectorRegistry()),
-                             publish_loop=False) as svc, channel("127.0.0.1", svc.grpc_port) as ch:
+    async with (
+        VisionService(
+            settings, None, None, grpc_port=0, metrics=CellMetrics(CollectorRegistry()), publish_loop=False
+        ) as svc,
+        channel("127.0.0.1", svc.grpc_port) as ch,
+    ):
         stub = vision_pb2_grpc.VisionStub(ch)
         with pytest.raises(CameraConnectionError, match="no camera"), rpc_errors():
             await stub.Detect(vision_pb2.DetectRequest())
@@ -195,8 +211,11 @@ def test_calibration_source_precedence(tmp_path):
 
     none = CalibrationSettings(file=str(tmp_path / "missing.yaml"))
     assert load_T_base_camera(none) == (None, "none (camera-frame results only)")
-    manual = CalibrationSettings(file=str(tmp_path / "missing.yaml"), manual_translation_m=(0.9, 0.0, 0.6),
-                                 manual_rpy_deg=(-145.0, 0.0, 90.0))
+    manual = CalibrationSettings(
+        file=str(tmp_path / "missing.yaml"),
+        manual_translation_m=(0.9, 0.0, 0.6),
+        manual_rpy_deg=(-145.0, 0.0, 90.0),
+    )
     T, source = load_T_base_camera(manual)
     assert T is not None and source.startswith("manual") and np.allclose(T[:3, 3], [0.9, 0.0, 0.6])
     T_file = np.eye(4)

@@ -108,13 +108,27 @@ def add_calibration_board(
         raise ConfigurationError("the cell MJCF has no <asset> or gripper body to hold the calibration board")
     png = board_texture_png(target, cache_dir)
     ET.SubElement(asset, "texture", name=BOARD_GEOM, type="2d", file=str(png))
-    ET.SubElement(asset, "material", name=BOARD_GEOM, texture=BOARD_GEOM, specular="0", shininess="0",
-                  reflectance="0")
+    ET.SubElement(
+        asset, "material", name=BOARD_GEOM, texture=BOARD_GEOM, specular="0", shininess="0", reflectance="0"
+    )
     v, uv, tri = _plate_mesh(target.size_m, board_mount(board, gripper))
-    ET.SubElement(asset, "mesh", name=BOARD_GEOM, vertex=mjcf._f(*v.ravel()), texcoord=mjcf._f(*uv.ravel()),
-                  face=" ".join(str(int(i)) for i in tri.ravel()))
-    ET.SubElement(body, "geom", name=BOARD_GEOM, type="mesh", mesh=BOARD_GEOM, material=BOARD_GEOM,
-                  mass=mjcf._f(BOARD_MASS_KG))
+    ET.SubElement(
+        asset,
+        "mesh",
+        name=BOARD_GEOM,
+        vertex=mjcf._f(*v.ravel()),
+        texcoord=mjcf._f(*uv.ravel()),
+        face=" ".join(str(int(i)) for i in tri.ravel()),
+    )
+    ET.SubElement(
+        body,
+        "geom",
+        name=BOARD_GEOM,
+        type="mesh",
+        mesh=BOARD_GEOM,
+        material=BOARD_GEOM,
+        mass=mjcf._f(BOARD_MASS_KG),
+    )
     ET.indent(root)
     return ET.tostring(root, encoding="unicode")
 
@@ -126,10 +140,20 @@ def twin_calibration_settings(settings: Settings) -> Settings:
     board = settings.vision.calibration.board
     guess = board_mount(board, settings.gripper).tolist()
     lo, hi = CALIBRATION_VOLUME_M
-    cal = settings.vision.calibration.model_copy(update={
-        "board": board.model_copy(update={"T_gripper_board_guess": guess}), "volume_min": lo, "volume_max": hi})
+    cal = settings.vision.calibration.model_copy(
+        update={
+            "board": board.model_copy(update={"T_gripper_board_guess": guess}),
+            "volume_min": lo,
+            "volume_max": hi,
+        }
+    )
     scene = settings.sim.twin.scene.model_copy(update={"rod": False, "cubes": [], "obstacle": False})
-    twin = settings.sim.twin.model_copy(update={"calibration_board": True, "scene": scene,
-                                                "initial_joints_deg": CALIBRATION_READY_DEG})
-    return settings.model_copy(update={"sim": settings.sim.model_copy(update={"twin": twin}),
-                                       "vision": settings.vision.model_copy(update={"calibration": cal})})
+    twin = settings.sim.twin.model_copy(
+        update={"calibration_board": True, "scene": scene, "initial_joints_deg": CALIBRATION_READY_DEG}
+    )
+    return settings.model_copy(
+        update={
+            "sim": settings.sim.model_copy(update={"twin": twin}),
+            "vision": settings.vision.model_copy(update={"calibration": cal}),
+        }
+    )

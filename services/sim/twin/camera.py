@@ -79,7 +79,9 @@ class TwinCamera:
         self._option = mujoco.MjvOption()
         self._camera_id = mujoco.mj_name2id(self._model, mujoco.mjtObj.mjOBJ_CAMERA, mjcf.CAMERA)
         self._lock = threading.Lock()
-        self._gl_executor = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="twin-camera-gl")
+        self._gl_executor = concurrent.futures.ThreadPoolExecutor(
+            max_workers=1, thread_name_prefix="twin-camera-gl"
+        )
         self._gl_owner: threading.Thread | None = None
         self._seq = 0
         self._closed = False
