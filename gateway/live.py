@@ -26,6 +26,7 @@ def joint_state_json(msg: common_pb2.JointState) -> Message:
     p = msg.tcp_pose
     return {
         "stamp_ns": msg.header.stamp_ns,
+        "source_stamp_ns": msg.source_stamp_ns,
         "seq": msg.header.seq,
         "name": list(msg.name),
         "position": [round(q, 6) for q in msg.position],
@@ -71,7 +72,9 @@ class LiveHub:
 
     def on_joint_state(self, msg: common_pb2.JointState) -> bool:
         """Keep and forward at most ``joint_rate_hz`` states per second; True when forwarded."""
-        stamp = msg.header.stamp_ns or time.time_ns()
+        # on the controller's clock (its feedback TimeStamp) when the state carries it: the driver's
+        # receive stamps bunch up when the machine is busy, the controller's do not
+        stamp = msg.source_stamp_ns or msg.header.stamp_ns or time.time_ns()
         if stamp < self._next_joint_ns:
             return False
         # Keep a fixed schedule, so 125 Hz in gives the full rate out (a minimum gap would give 17.9 Hz);

@@ -62,14 +62,15 @@ async def test_websocket_streams_decimated_joints_status_and_picks(
                         else:
                             others.setdefault(msg["type"], []).append(msg["data"])
                 elapsed = time.monotonic() - t0
-    stamps = [j["stamp_ns"] for j in joints]
+    # Decimated on the controller's clock (the feedback TimeStamp each state carries): 125 Hz from the
+    # driver, 20 Hz to the browser on a 50 ms schedule (the exact schedule is unit-tested in test_units).
+    # Judged by the stamps, never by arrival times: at most one state per 50 ms slot, about 50 ms apart
+    # (a busy simulator can skip feedback ticks, which moves single states within their slot).
+    stamps = [j["source_stamp_ns"] for j in joints]
     gaps_ms = [(b - a) / 1e6 for a, b in itertools.pairwise(stamps)]
-    # 125 Hz from the driver, 20 Hz to the browser, on a 50 ms schedule (the exact schedule is unit-tested
-    # in test_units). The simulator's feedback period jitters under load, so here: decimated (no 8 ms
-    # gaps), about 50 ms apart, and never more than one state per slot.
     assert len(joints) >= 10, f"only {len(joints)} joint states in {elapsed:.1f}s"
-    assert min(gaps_ms) > 25.0, gaps_ms
-    assert 45.0 <= statistics.median(gaps_ms) <= 60.0, gaps_ms
+    assert all(g > 0 for g in gaps_ms), gaps_ms
+    assert 40.0 <= statistics.median(gaps_ms) <= 80.0, gaps_ms
     assert len(stamps) <= (stamps[-1] - stamps[0]) / 50e6 + 1
     assert joints[-1]["name"][0] == "joint1" and abs(joints[-1]["position"][2] - 1.5707963) < 1e-5
     assert others["task_status"][-1]["state"] == "PLAN"

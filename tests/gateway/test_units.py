@@ -158,6 +158,20 @@ def test_hub_decimates_joint_states():
     assert hub.on_joint_state(_js(10_008_000_000)) is False
 
 
+def test_hub_decimates_on_the_controller_clock_when_the_state_carries_it():
+    # receive stamps bunched by a busy machine (1 ms apart) but controller stamps 8 ms apart: the
+    # controller's clock decides, so 20 Hz of controller time comes out
+    hub = LiveHub(joint_rate_hz=20)
+    forwarded = []
+    for k in range(1, 251):
+        msg = _js(1_000_000_000 + k * 1_000_000)
+        msg.source_stamp_ns = k * 8_000_000
+        forwarded.append(hub.on_joint_state(msg))
+    assert sum(forwarded) in (40, 41)
+    last = max(k for k, f in zip(range(1, 251), forwarded, strict=True) if f)
+    assert hub.joint_state is not None and hub.joint_state["source_stamp_ns"] == last * 8_000_000
+
+
 def test_hub_ignores_a_status_answer_older_than_the_shown_one():
     hub = LiveHub()
     estopped = robot_pb2.RobotStatus(connected=True, estop_active=True, robot_mode=9)
