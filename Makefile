@@ -52,4 +52,4 @@ up:
 
 # The same topology as separate OS processes on loopback (no Docker); Ctrl-C stops them all.
 up-local: install
-	MUJOCO_GL=egl $(PY) -m services.launcher up
+	MUJOCO_GL=egl $(PY) -m services.apps.launcher up

@@ -99,7 +99,7 @@ def _start_gateway(db: DatabaseSettings, port: int, robot_port: int, tmp: Path) 
     }
     env.pop("DATABASE_URL", None)
     return subprocess.Popen(
-        [sys.executable, "-m", "services.cli", "serve", "gateway"],
+        [sys.executable, "-m", "services.apps.cli", "serve", "gateway"],
         cwd=REPO_ROOT,
         env=env,
         stdout=subprocess.DEVNULL,

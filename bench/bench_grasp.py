@@ -27,8 +27,8 @@ from services.grasp.geometry import pose, rotation_z
 from services.grasp.plan import PickPlan
 from services.grasp.rod import RodObservation, plan_pick_and_stand
 from services.grasp.synthesis import ObjectSpec, compute_grasps
-from services.motion.collision import Box
-from services.motion.robot_models import get_robot
+from services.kinematics.collision import Box
+from services.kinematics.robot_models import get_robot
 
 Array = np.ndarray
 

@@ -15,13 +15,13 @@ import numpy as np
 
 from services.common.errors import RobotError
 from services.common.frames import make_transform
-from services.motion import analytic
-from services.motion.collision import Box, Scene
-from services.motion.kinematics import Kinematics, load_arm
+from services.kinematics import analytic
+from services.kinematics.collision import Box, Scene
+from services.kinematics.model import Kinematics, load_arm
+from services.kinematics.robot_models import get_robot
+from services.kinematics.trajectory import JointLimits, min_jerk_keypose_trajectory
 from services.motion.planner import MotionPlanner, PlannerConfig
-from services.motion.robot_models import get_robot
 from services.motion.timing import time_parameterize
-from services.motion.trajectory import JointLimits, min_jerk_keypose_trajectory
 
 ROBOTS = ("nova5", "ur5e", "ur3")
 DOWN = np.diag([1.0, -1.0, -1.0])

@@ -149,6 +149,6 @@ class CalibrationView(BaseModel):
 class ConfigUpdateResult(BaseModel):
     success: bool
     updated: list[str]
-    applied_now: list[str] = []  # in effect as soon as the services receive the update (well under a second)
+    applied_now: list[str] = []  # in effect as the services receive the update (well under a second)
     applied_next_cycle: list[str] = []  # taken at the next key-pose cycle / twin scene
     note: str = "changes last until the cell restarts; keep them in a config file or profile"

@@ -137,3 +137,9 @@ def _all_subclasses(cls: type[RobotError]) -> dict[str, type[RobotError]]:
 def error_class(name: str) -> type[RobotError]:
     """Look an error class up by name (used when an error comes back over a transport)."""
     return _all_subclasses(RobotError).get(name, RobotError)
+
+
+class InvalidFrameError(InvalidInputError, VisionError):
+    """A frame the vision cores cannot use: wrong shapes or types, NaN intrinsics, no depth."""
+
+    grpc_code = InvalidInputError.grpc_code

@@ -1,7 +1,7 @@
 """The collision filter of the grasp cores, backed by the motion package's coal checker.
 
 The cores take any ``collision_check(q, held) -> bool``; this adapter answers it with
-:class:`services.motion.collision.CollisionChecker` — the arm, the gripper, the table and the
+:class:`services.kinematics.collision.CollisionChecker` — the arm, the gripper, the table and the
 obstacle boxes, plus the held object when there is one (one checker per held-object pose,
 cached). The held object may touch the table (that is how it is put down; the cores check its
 clearance during the carry themselves).
@@ -15,9 +15,9 @@ import numpy as np
 
 from services.common.settings import Settings
 from services.grasp.plan import HeldObject
-from services.motion.collision import ATTACHED, TABLE, AttachedObject, Box, CollisionChecker, Scene
-from services.motion.kinematics import ArmModel, load_arm
-from services.motion.urdf import tool_geometry
+from services.kinematics.collision import ATTACHED, TABLE, AttachedObject, Box, CollisionChecker, Scene
+from services.kinematics.model import ArmModel, load_arm
+from services.kinematics.urdf import tool_geometry
 
 Array = np.ndarray
 

@@ -10,7 +10,7 @@ from pickplace.v1 import common_pb2, grasp_pb2, motion_pb2
 from services.common.errors import InvalidInputError
 from services.common.messages import matrix_to_pose
 from services.grasp.plan import Grasp, HeldObject, PickPlan, Waypoint
-from services.motion.collision import Box
+from services.kinematics.collision import Box
 
 Array = np.ndarray
 

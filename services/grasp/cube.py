@@ -27,8 +27,8 @@ from services.grasp.geometry import pose, pose_path, rotation_z
 from services.grasp.plan import Grasp, Guard, HeldObject, PickPlan, Waypoint
 from services.grasp.reach import check_reach, track_paths
 from services.grasp.synthesis import CollisionCheck, ObjectSpec, synthesize, track_limits
-from services.motion.analytic import fk
-from services.motion.robot_models import RobotSpec
+from services.kinematics.analytic import fk
+from services.kinematics.robot_models import RobotSpec
 
 Array = np.ndarray
 

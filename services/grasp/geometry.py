@@ -85,7 +85,7 @@ def rotation_z(angle: float) -> Array:
 
 def pose_path(T_a: Array, T_b: Array, step_m: float, n: int | None = None) -> Array:
     """Tool poses (n + 1, 4, 4) on the straight line a → b (position lerp, orientation slerp), both ends
-    included; ``n`` steps, or as many as keep each step ≤ ``step_m``."""
+    included; ``n`` steps, or as keep each step ≤ ``step_m``."""
     d = float(np.linalg.norm(T_b[:3, 3] - T_a[:3, 3]))
     n = n or max(1, math.ceil(d / step_m))
     s = np.linspace(0.0, 1.0, n + 1)

@@ -3,7 +3,7 @@
 Tool frame convention (the twin's, ``services/sim/twin/mjcf.py``): ``tool_tip`` is the grasp
 centre between the pads, tool +z points out of the flange (the approach direction), the jaws
 close along tool y. A waypoint's gripper action runs *after* the arm reaches it. A guarded
-waypoint is approached along a straight line and the motion stops early as soon as the wrist
+waypoint is approached along a straight line and the motion stops early as the wrist
 force drops by ``force_drop_n`` (the object touched down); it may go ``overtravel_m`` past the
 nominal pose if it has not touched yet. ``hold`` means no motion: act where the arm stands
 (release at touch height, do not push down — the twin notes).

@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from services.common.errors import IKFailureError
-from services.motion.analytic import dh_matrices, ik_all
-from services.motion.robot_models import RobotSpec
+from services.kinematics.analytic import dh_matrices, ik_all
+from services.kinematics.robot_models import RobotSpec
 
 Array = np.ndarray
 

@@ -45,8 +45,8 @@ from services.grasp.geometry import cylinder_lowest_z, lowest_gripper_z, pose, p
 from services.grasp.plan import Grasp, Guard, HeldObject, PickPlan, Waypoint
 from services.grasp.reach import check_reach, track_paths
 from services.grasp.synthesis import CollisionCheck, contact_model, track_limits, width_quality
-from services.motion.analytic import fk
-from services.motion.robot_models import RobotSpec
+from services.kinematics.analytic import fk
+from services.kinematics.robot_models import RobotSpec
 
 Array = np.ndarray
 

@@ -34,7 +34,7 @@ from services.grasp.convert import (
 from services.grasp.cube import CubeObservation, plan_pick_and_place
 from services.grasp.rod import RodObservation, plan_pick_and_stand
 from services.grasp.synthesis import ObjectSpec, compute_grasps
-from services.motion.robot_models import get_robot
+from services.kinematics.robot_models import get_robot
 
 log = logging.getLogger("pickplace.grasp.service")
 

@@ -35,7 +35,7 @@ from services.grasp.force_closure import ContactModel, evaluate_force_closure
 from services.grasp.geometry import lowest_gripper_z, pose, pose_path, tool_rotation
 from services.grasp.plan import Grasp, HeldObject
 from services.grasp.reach import TrackLimits, track_paths
-from services.motion.robot_models import RobotSpec
+from services.kinematics.robot_models import RobotSpec
 
 Array = np.ndarray
 

@@ -31,12 +31,10 @@ from services.common.errors import (
     PathPlanningTimeoutError,
     TrajectoryLimitError,
 )
-from services.motion.cartesian import cartesian_path
-from services.motion.collision import CollisionChecker, Scene
-from services.motion.kinematics import ArmModel, Kinematics, check_pose, pose_text
-from services.motion.sampling import PLANNERS, plan_path, seed_planning
-from services.motion.timing import time_parameterize
-from services.motion.trajectory import (
+from services.kinematics.cartesian import cartesian_path
+from services.kinematics.collision import CollisionChecker, Scene
+from services.kinematics.model import ArmModel, Kinematics, check_pose, pose_text
+from services.kinematics.trajectory import (
     Array,
     JointLimits,
     JointTrajectory,
@@ -44,6 +42,8 @@ from services.motion.trajectory import (
     verify_trajectory,
     wrap_toward,
 )
+from services.motion.sampling import PLANNERS, plan_path, seed_planning
+from services.motion.timing import time_parameterize
 
 LOCAL_MARGIN_RAD = 1.0  # first sampling box: the start–goal box grown by this on every joint
 LOCAL_BUDGET_SHARE = 0.6  # share of the remaining budget the local attempt may use

@@ -17,7 +17,7 @@ from ompl import geometric as og
 from ompl import util as ou
 
 from services.common.errors import InvalidInputError, PathPlanningTimeoutError
-from services.motion.trajectory import Array, JointLimits
+from services.kinematics.trajectory import Array, JointLimits
 
 
 def _rrt_star(si: ob.SpaceInformation) -> ob.Planner:

@@ -23,12 +23,12 @@ from services.common.errors import InvalidInputError
 from services.common.live_config import LiveConfig
 from services.common.messages import pose_to_matrix
 from services.common.settings import MotionSettings, Settings
-from services.motion.collision import AttachedObject, Box, Scene
-from services.motion.kinematics import ArmModel, Kinematics, load_arm
+from services.kinematics.collision import AttachedObject, Box, Scene
+from services.kinematics.model import ArmModel, Kinematics, load_arm
+from services.kinematics.robot_models import ROBOTS
+from services.kinematics.trajectory import Array, JointTrajectory
+from services.kinematics.urdf import tool_geometry
 from services.motion.planner import MotionPlanner, Plan, PlannerConfig, Waypoint
-from services.motion.robot_models import ROBOTS
-from services.motion.trajectory import Array, JointTrajectory
-from services.motion.urdf import tool_geometry
 
 log = logging.getLogger("pickplace.motion.service")
 

@@ -8,7 +8,7 @@
 - ``rest_to_rest``: ruckig from waypoint to waypoint, stopping at each — exactly on
   the polyline (used when a smooth blend must not leave the checked path).
 
-Every result passes :func:`services.motion.trajectory.verify_trajectory` before
+Every result passes :func:`services.kinematics.trajectory.verify_trajectory` before
 it is returned (a known weakness of MoveIt's time parameterisation is that
 nobody checks); limits are tightened and the step repeated when it does not.
 """
@@ -27,7 +27,7 @@ from numpy.typing import ArrayLike
 from ruckig import InputParameter, OutputParameter, Result, Ruckig, RuckigError, Synchronization, Trajectory
 
 from services.common.errors import InvalidInputError, TrajectoryLimitError
-from services.motion.trajectory import Array, JointLimits, JointTrajectory, joint_path, verify_trajectory
+from services.kinematics.trajectory import Array, JointLimits, JointTrajectory, joint_path, verify_trajectory
 
 log = logging.getLogger("pickplace.motion.timing")
 # toppra logs its numerical failures at WARNING with its own handler (each line came out twice); a

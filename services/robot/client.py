@@ -1,5 +1,5 @@
 """Asyncio client for a Dobot V4 controller (real or simulated): the I/O around
-:mod:`services.robot.protocol`.
+:mod:`services.dobot.protocol`.
 
 - Dashboard (29999): requests may be in flight together; replies are matched to
   requests by their echo, so a late reply after a timeout never shifts the
@@ -38,8 +38,8 @@ from services.common.errors import (
 )
 from services.common.frames import dobot_pose_to_transform, finite_vector, transform_to_dobot_pose
 from services.common.settings import ReconnectSettings
-from services.robot import protocol as P
-from services.robot.protocol import RobotMode
+from services.dobot import protocol as P
+from services.dobot.protocol import RobotMode
 
 log = logging.getLogger("pickplace.robot.client")
 

@@ -28,12 +28,12 @@ from services.common.errors import (
     TrajectoryExecutionError,
 )
 from services.common.settings import Settings
-from services.motion import analytic
-from services.motion.robot_models import RobotSpec
-from services.motion.trajectory import JointTrajectory
+from services.dobot.protocol import RobotMode
+from services.kinematics import analytic
+from services.kinematics.robot_models import RobotSpec
+from services.kinematics.trajectory import JointTrajectory
 from services.robot.client import DobotClient, FeedbackState
 from services.robot.gripper import DigitalOutputGripper, GripperState
-from services.robot.protocol import RobotMode
 from services.robot.safety import SafetyLimits
 
 log = logging.getLogger("pickplace.robot.driver")
@@ -191,7 +191,7 @@ class RobotDriver:
         Checked first, as a whole: joint names, the start against the measured
         joints, every streamed target against joint and workspace limits, and the
         joint speeds between targets. Streaming stops at once on stop/e-stop or
-        when the controller alarms. A guarded move passes ``stop_when``: as soon as a
+        when the controller alarms. A guarded move passes ``stop_when``: as a
         feedback packet satisfies it the queue is stopped and the result says so.
         """
         if tuple(traj.joint_names) != tuple(self.spec.joint_names):
@@ -305,8 +305,8 @@ class RobotDriver:
 
         Every segment is checked like any trajectory (joints, speed, workspace) before it is sent;
         there is no obstacle avoidance here — the task service plans collision-free picks."""
-        from services.motion.cartesian import straight_line_joint_path
-        from services.motion.trajectory import JointLimits, min_jerk_keypose_trajectory
+        from services.kinematics.cartesian import straight_line_joint_path
+        from services.kinematics.trajectory import JointLimits, min_jerk_keypose_trajectory
 
         if self.limits.T_flange_tool is None:
             raise InvalidInputError("ExecuteGrasp needs the gripper's tool offset (gripper.tcp_offset_m)")

@@ -7,9 +7,9 @@ import time
 from pickplace.v1 import common_pb2, robot_pb2
 
 from services.common.messages import matrix_to_pose
-from services.motion.robot_models import RobotSpec
+from services.dobot.protocol import RobotMode
+from services.kinematics.robot_models import RobotSpec
 from services.robot.client import FeedbackState
-from services.robot.protocol import RobotMode
 
 
 def joint_state_msg(fb: FeedbackState, spec: RobotSpec, seq: int = 0) -> common_pb2.JointState:

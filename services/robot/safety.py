@@ -13,8 +13,8 @@ import numpy as np
 
 from services.common.errors import InvalidInputError, LimitViolationError
 from services.common.settings import WorkspaceBounds
-from services.motion import analytic
-from services.motion.robot_models import RobotSpec
+from services.kinematics import analytic
+from services.kinematics.robot_models import RobotSpec
 
 
 @dataclass(frozen=True)

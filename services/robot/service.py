@@ -24,8 +24,8 @@ from services.common.keys import CellKeys
 from services.common.live_config import LiveConfig
 from services.common.messages import pose_to_matrix
 from services.common.settings import Settings
-from services.motion.robot_models import get_robot
-from services.motion.trajectory import JointTrajectory
+from services.kinematics.robot_models import get_robot
+from services.kinematics.trajectory import JointTrajectory
 from services.robot.client import DobotClient, FeedbackState
 from services.robot.driver import RobotDriver
 from services.robot.messages import joint_state_msg, robot_status_msg

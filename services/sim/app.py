@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from services.common.settings import Settings
-from services.motion.robot_models import get_robot
+from services.kinematics.robot_models import get_robot
 from services.sim.controller import ControllerConfig, SimController
 from services.sim.dobot_server import SimDobotServer
 from services.sim.engine import KinematicEngine, MotionEngine

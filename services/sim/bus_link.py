@@ -25,9 +25,9 @@ from services.common.bus import Bus
 from services.common.errors import InvalidInputError, RobotCommunicationError
 from services.common.keys import CellKeys
 from services.common.live_config import LiveConfig, with_twin
+from services.common.sensors import RGBDFrame
 from services.common.settings import Settings
 from services.sim.dobot_server import SimDobotServer
-from services.vision.camera import RGBDFrame
 
 log = logging.getLogger("pickplace.sim.bus")
 
@@ -102,8 +102,8 @@ class SimBusLink:
         self._live: LiveConfig | None = None
 
     async def __aenter__(self) -> SimBusLink:
+        from services.common.sensors import publish_camera_frames
         from services.sim.twin.camera import TwinCamera
-        from services.vision.service import publish_camera_frames
 
         keys = CellKeys(self.settings.cell_id)
         if self.frames:

@@ -25,11 +25,11 @@ from services.common.frames import (
     rpy_deg_to_matrix,
     transform_to_dobot_pose,
 )
-from services.motion import analytic
-from services.motion.cartesian import straight_line_joint_path
-from services.motion.robot_models import RobotSpec
-from services.robot import protocol as P
-from services.robot.protocol import RobotMode
+from services.dobot import protocol as P
+from services.dobot.protocol import RobotMode
+from services.kinematics import analytic
+from services.kinematics.cartesian import straight_line_joint_path
+from services.kinematics.robot_models import RobotSpec
 from services.sim.engine import EngineState, MotionEngine
 from services.sim.motion_profiles import LinearInTime, PathProfile, PointToPoint, Profile, trapezoid_time
 

@@ -24,9 +24,9 @@ from services.common.frames import make_transform
 from services.common.grpc_util import channel, rpc_errors
 from services.common.messages import matrix_to_pose, pose_to_matrix
 from services.common.settings import Settings
-from services.motion import analytic
-from services.motion.robot_models import get_robot
-from services.motion.trajectory import JointTrajectory
+from services.kinematics import analytic
+from services.kinematics.robot_models import get_robot
+from services.kinematics.trajectory import JointTrajectory
 from services.task.ports import (
     GraspPlan,
     GripOutcome,
@@ -74,7 +74,7 @@ class CellClients:
             )
         }
         self.vision = GrpcVision(vision_pb2_grpc.VisionStub(self._channels["vision"]), g.request_timeout_s)
-        # planning requests may take as long as the PLAN state's deadline allows
+        # planning requests may take as the PLAN state's deadline allows
         plan_timeout = max(g.request_timeout_s, settings.task.plan_deadline_s)
         self.grasp = GrpcGrasp(grasp_pb2_grpc.GraspPlannerStub(self._channels["grasp"]), plan_timeout)
         self.motion = GrpcMotion(motion_pb2_grpc.MotionPlannerStub(self._channels["motion"]), settings)

@@ -27,7 +27,7 @@ from services.common.errors import (
     SafetyError,
 )
 from services.common.frames import matrix_to_quat_xyzw
-from services.motion.trajectory import JointTrajectory
+from services.kinematics.trajectory import JointTrajectory
 from services.task.placement import free_place_xy, place_candidates
 from services.task.plan import state_for
 from services.task.ports import (

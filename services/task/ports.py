@@ -11,7 +11,7 @@ from typing import Protocol
 
 import numpy as np
 
-from services.motion.trajectory import JointTrajectory
+from services.kinematics.trajectory import JointTrajectory
 
 
 @dataclass(frozen=True)

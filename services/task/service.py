@@ -310,12 +310,10 @@ class TaskService:
         await self.stop()
 
 
-async def serve(settings: Settings) -> None:
+async def serve(settings: Settings, between_cycles: Callable[[Bus], object] | None = None) -> None:
+    """``pickplace serve task``; ``between_cycles(bus)`` (from the composition root) runs after each cycle."""
     async with Bus(settings.zenoh) as bus, TaskService(settings, bus) as svc:
         assert svc.server is not None
-        if settings.task.reset_scene_each_cycle and settings.profile == "sim":
-            from services.sim.bus_link import request_scene_reset
-
-            # the simulated operator lays out a fresh scene in the sim-dobot process between cycles
-            svc.runner.between_cycles = lambda: request_scene_reset(bus, settings.cell_id)
+        if between_cycles is not None:
+            svc.runner.between_cycles = lambda: between_cycles(bus)
         await svc.server.wait_for_termination()

@@ -8,5 +8,5 @@ ChArUco board), ``synthetic`` (seeded ray-cast test scenes with ground truth).
 Shells: ``camera`` (the Camera protocol), ``realsense``, ``replay`` (sources and the recorder),
 ``calibrate_workflow`` (the robot-driven calibration run), ``service`` (gRPC + Zenoh + metrics).
 
-Kept import-free: the twin imports ``services.vision.camera`` and must not pull in the detectors.
+Kept import-free: the twin imports ``services.common.sensors`` and must not pull in the detectors.
 """

@@ -18,10 +18,11 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from services.common.charuco import BoardObservation, CharucoTarget, default_T_gripper_board
 from services.common.errors import InvalidInputError, RobotError, VisionError
 from services.common.frames import check_transform, invert_transform, make_transform
+from services.common.sensors import Camera, CameraIntrinsics
 from services.common.settings import CalibrationSettings
-from services.vision.board import BoardObservation, CharucoTarget
 from services.vision.calibration import (
     DriftReport,
     HandEyeResult,
@@ -31,7 +32,6 @@ from services.vision.calibration import (
     solve_eye_to_hand,
     write_calibration,
 )
-from services.vision.camera import Camera, CameraIntrinsics
 
 Array = np.ndarray
 
@@ -49,12 +49,6 @@ class CalibrationRobot(Protocol):
     async def get_pose(self) -> Array:
         """The measured T_base_gripper now."""
         ...
-
-
-def default_T_gripper_board(target: CharucoTarget, standoff_m: float = 0.02) -> Array:
-    """A board on the flange facing along the tool z axis, centred ``standoff_m`` out (a guess only)."""
-    R = Rotation.from_euler("x", 180, degrees=True).as_matrix()  # board z (into the board) = -tool z
-    return make_transform(R, np.array([0.0, 0.0, standoff_m]) - R @ target.center_board)
 
 
 def generate_calibration_poses(

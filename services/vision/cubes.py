@@ -25,8 +25,8 @@ import cv2
 import numpy as np
 from sklearn.cluster import DBSCAN
 
+from services.common.sensors import CameraIntrinsics
 from services.common.settings import CubeDetectionSettings
-from services.vision.camera import CameraIntrinsics
 from services.vision.geometry import (
     Plane,
     backproject,

@@ -13,7 +13,7 @@ from functools import lru_cache
 import numpy as np
 
 from services.common.errors import InvalidInputError, VisionError
-from services.vision.camera import CameraIntrinsics
+from services.common.sensors import CameraIntrinsics
 
 Array = np.ndarray
 

@@ -5,9 +5,6 @@ from __future__ import annotations
 import numpy as np
 from pickplace.v1 import common_pb2, vision_pb2
 
-from services.common.errors import InvalidInputError
-from services.vision.camera import CameraIntrinsics, RGBDFrame
-from services.vision.pipeline import InvalidFrameError
 from services.vision.pose import rotation_to_quaternion
 from services.vision.results import DetectionResult
 
@@ -33,52 +30,6 @@ def pose(p: Array, R: Array) -> common_pb2.Pose:
         qz=float(q[2]),
         qw=float(q[3]),
     )
-
-
-def frame_to_msg(frame: RGBDFrame) -> vision_pb2.RGBDFrame:
-    f = frame.validate()
-    i = f.intrinsics
-    return vision_pb2.RGBDFrame(
-        header=common_pb2.Header(stamp_ns=f.stamp_ns, frame_id=f.frame_id, seq=f.seq),
-        intrinsics=vision_pb2.CameraIntrinsics(
-            width=i.width, height=i.height, fx=i.fx, fy=i.fy, cx=i.cx, cy=i.cy, distortion=list(i.distortion)
-        ),
-        color_rgb8=np.ascontiguousarray(f.color).tobytes(),
-        depth_u16=np.ascontiguousarray(f.depth.astype("<u2")).tobytes(),
-        depth_scale=f.depth_scale,
-    )
-
-
-def msg_to_frame(msg: vision_pb2.RGBDFrame) -> RGBDFrame:
-    """Decode a frame message; InvalidFrameError (a VisionError) names what does not fit."""
-    i = msg.intrinsics
-    w, h = int(i.width), int(i.height)
-    if w <= 0 or h <= 0:
-        raise InvalidFrameError(f"frame message has no image size ({w}x{h})")
-    if len(msg.color_rgb8) != w * h * 3:
-        raise InvalidFrameError(
-            f"colour payload is {len(msg.color_rgb8)} bytes, {w}x{h} RGB8 needs {w * h * 3}"
-        )
-    if len(msg.depth_u16) != w * h * 2:
-        raise InvalidFrameError(
-            f"depth payload is {len(msg.depth_u16)} bytes, {w}x{h} uint16 needs {w * h * 2}"
-        )
-    intr = CameraIntrinsics(
-        width=w, height=h, fx=i.fx, fy=i.fy, cx=i.cx, cy=i.cy, distortion=tuple(i.distortion)
-    )
-    frame = RGBDFrame(
-        color=np.frombuffer(msg.color_rgb8, np.uint8).reshape(h, w, 3),
-        depth=np.frombuffer(msg.depth_u16, "<u2").reshape(h, w).astype(np.uint16),
-        intrinsics=intr,
-        depth_scale=msg.depth_scale or 0.001,
-        stamp_ns=msg.header.stamp_ns,
-        frame_id=msg.header.frame_id or "camera",
-        seq=msg.header.seq,
-    )
-    try:
-        return frame.validate()
-    except InvalidInputError as exc:
-        raise InvalidFrameError(str(exc)) from exc
 
 
 def detections_msg(result: DetectionResult, frame_id: str = "camera") -> vision_pb2.DetectedObjects:

@@ -13,10 +13,10 @@ import cv2
 import numpy as np
 from threadpoolctl import ThreadpoolController
 
-from services.common.errors import InvalidInputError, VisionError
+from services.common.errors import InvalidFrameError, InvalidInputError, VisionError
 from services.common.frames import check_transform
+from services.common.sensors import RGBDFrame
 from services.common.settings import VisionSettings
-from services.vision.camera import RGBDFrame
 from services.vision.cubes import detect_cubes_and_obstacles
 from services.vision.geometry import Plane, backproject, fit_plane_ransac, scaled_stride
 from services.vision.results import DetectionResult, RodDetection
@@ -25,12 +25,6 @@ from services.vision.rod import detect_rods, heights_at
 Array = np.ndarray
 
 MIN_VALID_DEPTH_FRACTION = 0.05
-
-
-class InvalidFrameError(InvalidInputError, VisionError):
-    """A frame the vision cores cannot use: wrong shapes or types, NaN intrinsics, no depth."""
-
-    grpc_code = InvalidInputError.grpc_code
 
 
 def validate_frame(frame: RGBDFrame) -> Array:

@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 
 from services.common.errors import CameraConnectionError
+from services.common.sensors import CameraIntrinsics, RGBDFrame
 from services.common.settings import CameraSourceSettings
-from services.vision.camera import CameraIntrinsics, RGBDFrame
 
 FRAME_TIMEOUT_MS = 2000
 
@@ -32,7 +32,7 @@ def _import_rs() -> ModuleType:
 
 
 class RealSenseCamera:
-    """A D435i (or any RealSense with colour + depth) as a :class:`~services.vision.camera.Camera`."""
+    """A D435i (or any RealSense with colour + depth) as a :class:`~services.common.sensors.Camera`."""
 
     def __init__(self, settings: CameraSourceSettings):
         self.settings = settings

@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from services.common.errors import CameraConnectionError, InvalidInputError
-from services.vision.camera import Camera, CameraIntrinsics, RGBDFrame
+from services.common.sensors import Camera, CameraIntrinsics, RGBDFrame
 
 _INDEX = re.compile(r"^(color|depth)_(\d+)\.png$")
 

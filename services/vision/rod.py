@@ -29,8 +29,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from services.common.sensors import CameraIntrinsics
 from services.common.settings import RodDetectionSettings
-from services.vision.camera import CameraIntrinsics
 from services.vision.geometry import Plane, pixel_rays, project, ray_factors, resolution_scale
 from services.vision.lsq import robust_least_squares
 from services.vision.pose import estimate_pca_pose

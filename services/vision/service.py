@@ -39,10 +39,15 @@ from services.common.errors import (
 from services.common.keys import CellKeys
 from services.common.live_config import LiveConfig
 from services.common.metrics import CellMetrics
+from services.common.sensors import (
+    Camera,
+    CameraIntrinsics,
+    RGBDFrame,
+    msg_to_frame,
+)
 from services.common.settings import REPO_ROOT, CalibrationSettings, CameraSourceSettings, Settings
 from services.vision.calibration import manual_T_base_camera, read_calibration
-from services.vision.camera import Camera, CameraIntrinsics, RGBDFrame
-from services.vision.messages import detections_msg, frame_to_msg, msg_to_frame
+from services.vision.messages import detections_msg
 from services.vision.overlay import overlay_jpeg
 from services.vision.pipeline import VisionPipeline, replace_timings
 from services.vision.results import DetectionResult
@@ -331,23 +336,6 @@ class BusCamera:
     def close(self) -> None:
         with contextlib.suppress(Exception):
             self._sub.undeclare()
-
-
-async def publish_camera_frames(
-    camera: Camera, bus: Bus, key: str, rate_hz: float, stop: asyncio.Event
-) -> int:
-    """Stream a camera's frames onto Zenoh (for ``vision.camera.source: bus`` consumers); returns the count."""
-    period = 1.0 / rate_hz
-    n = 0
-    while not stop.is_set():
-        t0 = time.monotonic()
-        frame = await asyncio.to_thread(camera.capture)
-        bus.publish(key, frame_to_msg(frame))
-        n += 1
-        with contextlib.suppress(TimeoutError):
-            async with asyncio.timeout(max(0.0, period - (time.monotonic() - t0))):
-                await stop.wait()
-    return n
 
 
 async def serve(settings: Settings, camera: Camera | None = None) -> None:

@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from services.common.frames import make_transform
-from services.vision.camera import CameraIntrinsics, RGBDFrame
+from services.common.sensors import CameraIntrinsics, RGBDFrame
 
 Array = np.ndarray
 

@@ -15,8 +15,7 @@ import typer
 import yaml
 from pydantic import BaseModel
 
-from services.common.settings import Settings, load_settings
-from services.launcher import (
+from services.apps.launcher import (
     CONTAINER_ONLY_ENV,
     DEFAULT_METRICS_PORTS,
     LOCAL_ONLY_ENV,
@@ -26,6 +25,7 @@ from services.launcher import (
     service_args,
     topology,
 )
+from services.common.settings import Settings, load_settings
 from tests.conftest import free_port
 from tests.deploy.promtext import REPO, dashboards, exposition_names, panels, queried_metrics, query_exprs
 
@@ -85,11 +85,11 @@ def click_resolve(app: typer.Typer, args: list[str]) -> tuple[Any, dict[str, Any
 
 
 def cli_for(service: dict[str, Any]) -> tuple[typer.Typer, list[str]]:
-    from services import launcher
-    from services.cli import app
+    from services.apps import launcher
+    from services.apps.cli import app
 
     entry = service.get("entrypoint")
-    if entry == ["python", "-m", "services.launcher"]:
+    if entry == ["python", "-m", "services.apps.launcher"]:
         return launcher.app, list(service["command"])
     assert entry is None, f"unexpected entrypoint {entry}"
     return app, list(service["command"])  # the image's ENTRYPOINT is `pickplace`
@@ -110,7 +110,7 @@ def test_every_compose_command_exists_in_the_cli(name):
     app, args = cli_for(CSERVICES[name])
     _cmd, params = click_resolve(app, args)
     if args[0] == "serve":
-        from services.cli import SERVICES as SERVE
+        from services.apps.cli import SERVICES as SERVE
 
         assert params["service"] in SERVE
     if name in SERVICES:
@@ -120,7 +120,7 @@ def test_every_compose_command_exists_in_the_cli(name):
 
 
 def test_an_unknown_command_is_caught_by_the_resolver():
-    from services.cli import app
+    from services.apps.cli import app
 
     with pytest.raises(Exception, match="No such option"):
         click_resolve(app, ["sim-dobot", "--no-such-option"])
@@ -213,11 +213,11 @@ def test_ports_do_not_clash():
 
 
 def test_healthchecks_use_the_probe_command_and_dependencies_wait_for_health():
-    from services import launcher
+    from services.apps import launcher
 
     for name in SERVICES:
         test = CSERVICES[name]["healthcheck"]["test"]
-        assert test[:4] == ["CMD", "python", "-m", "services.launcher"]
+        assert test[:4] == ["CMD", "python", "-m", "services.apps.launcher"]
         _cmd, params = click_resolve(launcher.app, test[4:])
         assert params["service"] == name
     for name in PICKPLACE_SERVICES:
@@ -232,7 +232,7 @@ def run_probe(service: str, env: dict[str, str]) -> subprocess.CompletedProcess[
 
     full = {k: v for k, v in os.environ.items() if not k.startswith("PICKPLACE_")} | env
     return subprocess.run(
-        [sys.executable, "-m", "services.launcher", "health", service, "--timeout", "2"],
+        [sys.executable, "-m", "services.apps.launcher", "health", service, "--timeout", "2"],
         env=full,
         cwd=REPO,
         capture_output=True,

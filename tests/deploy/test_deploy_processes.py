@@ -14,10 +14,7 @@ import urllib.request
 import pytest
 from pickplace.v1 import task_pb2
 
-from services.common.bus import Bus
-from services.common.keys import CellKeys
-from services.common.settings import load_settings
-from services.launcher import (
+from services.apps.launcher import (
     SERVICES,
     Launcher,
     LocalPorts,
@@ -26,6 +23,9 @@ from services.launcher import (
     run_single_cycle,
     topology,
 )
+from services.common.bus import Bus
+from services.common.keys import CellKeys
+from services.common.settings import load_settings
 from services.sim.bus_link import request_scene_reset
 from tests.deploy.promtext import (
     dashboards,

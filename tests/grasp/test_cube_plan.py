@@ -12,9 +12,9 @@ from services.grasp.collision import MotionCollisionCheck, tool_geometry
 from services.grasp.cube import CubeObservation, drop_zone, plan_pick_and_place
 from services.grasp.geometry import pose, rotation_z
 from services.grasp.plan import PickPlan
-from services.motion.analytic import fk
-from services.motion.collision import Box
-from services.motion.robot_models import get_robot
+from services.kinematics.analytic import fk
+from services.kinematics.collision import Box
+from services.kinematics.robot_models import get_robot
 
 SETTINGS = load_settings("sim", overrides={"logging": {"file": None}})
 CFG = SETTINGS.grasp

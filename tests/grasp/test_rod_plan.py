@@ -16,11 +16,11 @@ from services.grasp.collision import MotionCollisionCheck, tool_geometry
 from services.grasp.geometry import pose
 from services.grasp.plan import PickPlan
 from services.grasp.rod import RodObservation, plan_pick_and_stand
-from services.motion.analytic import fk
-from services.motion.cartesian import cartesian_path
-from services.motion.collision import Box
-from services.motion.kinematics import Kinematics, load_arm
-from services.motion.robot_models import get_robot
+from services.kinematics.analytic import fk
+from services.kinematics.cartesian import cartesian_path
+from services.kinematics.collision import Box
+from services.kinematics.model import Kinematics, load_arm
+from services.kinematics.robot_models import get_robot
 
 SETTINGS = load_settings("sim", overrides={"logging": {"file": None}})
 CFG = SETTINGS.grasp

@@ -10,8 +10,8 @@ from services.common.errors import InvalidInputError
 from services.common.settings import GraspSettings, load_settings
 from services.grasp.geometry import lowest_gripper_z, pose, rotation_z
 from services.grasp.synthesis import ObjectSpec, compute_grasps, synthesize, width_quality
-from services.motion.analytic import fk
-from services.motion.robot_models import get_robot
+from services.kinematics.analytic import fk
+from services.kinematics.robot_models import get_robot
 
 SETTINGS = load_settings("sim", overrides={"logging": {"file": None}})
 CFG = SETTINGS.grasp

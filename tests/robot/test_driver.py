@@ -12,7 +12,7 @@ from services.common.errors import (
     LimitViolationError,
     TrajectoryExecutionError,
 )
-from services.motion.trajectory import JointLimits, min_jerk_keypose_trajectory, quintic_move
+from services.kinematics.trajectory import JointLimits, min_jerk_keypose_trajectory, quintic_move
 from services.robot.service import build_driver
 from tests.conftest import HOME
 
@@ -54,7 +54,7 @@ async def test_limit_violations_are_not_sent(driver, sim_server):
 async def test_workspace_floor_is_enforced(driver, sim_server):
     # tool below the table plane (z < 0): reachable for the arm, refused by the driver
     q_low = np.deg2rad([0, 110, 10, 0, -90, 0])
-    from services.motion import analytic
+    from services.kinematics import analytic
 
     assert analytic.fk(driver.spec, q_low)[2, 3] < 0
     with pytest.raises(LimitViolationError, match="on z"):
@@ -183,7 +183,7 @@ async def test_gripper_on_digital_outputs(driver, sim_server):
 
 
 def test_keypose_trajectory_wraps_only_continuous_joints(robot_settings):
-    from services.motion.robot_models import NOVA5
+    from services.kinematics.robot_models import NOVA5
 
     lim = JointLimits.from_spec(NOVA5)
     a = np.deg2rad([170, 0, 90, 0, -90, 170])

@@ -122,7 +122,7 @@ async def test_estop_over_grpc_during_move(stub, service):
 async def test_execute_grasp_lld_13_2(stub, service):
     """ExecuteGrasp: open, approach along the tool axis, straight descent, close, lift — checked first."""
     from services.common.messages import matrix_to_pose
-    from services.motion import analytic
+    from services.kinematics import analytic
 
     await stub.Enable(robot_pb2.EnableRequest())
     drv = service.driver

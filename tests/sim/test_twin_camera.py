@@ -11,12 +11,12 @@ from typer.testing import CliRunner
 
 from services.common.errors import CameraConnectionError, InvalidInputError
 from services.common.frames import check_transform, invert_transform
+from services.common.sensors import Camera
 from services.sim.twin import TwinEngine, create_twin_engine
 from services.sim.twin import ground_truth as gt
 from services.sim.twin.camera import TwinCamera
 from services.sim.twin.cli import app
 from services.sim.twin.dataset import LABEL_OBSTACLE, load_sim_scene, write_sim_scene
-from services.vision.camera import Camera
 from tests.sim.twin_helpers import twin_settings
 
 SEED = 3

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from services.common.errors import ConfigurationError, InvalidInputError
-from services.motion.analytic import fk
+from services.kinematics.analytic import fk
 from services.sim.twin import mjcf
 from services.sim.twin.model import build_world
 from services.sim.twin.scene import hollow_tube_inertia, sample_scene

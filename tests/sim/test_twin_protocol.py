@@ -9,9 +9,9 @@ import pytest
 
 from services.common.errors import ControllerError
 from services.common.settings import ReconnectSettings, Settings
-from services.motion.robot_models import get_robot
+from services.dobot.protocol import RobotMode
+from services.kinematics.robot_models import get_robot
 from services.robot.client import DobotClient
-from services.robot.protocol import RobotMode
 from services.sim.app import build_sim_server
 from services.sim.twin.trial import ScriptedArm
 from tests.sim.twin_helpers import top_down_tool, twin_settings

@@ -21,11 +21,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from services.common.charuco import CharucoTarget, default_T_gripper_board
 from services.common.errors import ConfigurationError
 from services.common.settings import CalibrationBoardSettings, GripperSettings, Settings
 from services.sim.twin import mjcf
-from services.vision.board import CharucoTarget
-from services.vision.calibrate_workflow import default_T_gripper_board
 
 Array = np.ndarray
 

@@ -24,11 +24,11 @@ import mujoco
 import numpy as np
 
 from services.common.errors import CameraConnectionError
+from services.common.sensors import CameraIntrinsics, RGBDFrame
 from services.common.settings import TwinCameraSettings
 from services.sim.twin import mjcf
 from services.sim.twin.engine import TwinEngine, TwinSnapshot
 from services.sim.twin.noise import DepthNoiseModel, apply_depth_noise, apply_rgb_noise, to_z16
-from services.vision.camera import CameraIntrinsics, RGBDFrame
 
 Array = np.ndarray
 

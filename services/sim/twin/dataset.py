@@ -24,11 +24,11 @@ import numpy as np
 
 from services.common.errors import InvalidInputError
 from services.common.frames import invert_transform, make_transform
+from services.common.sensors import CameraIntrinsics, RGBDFrame
 from services.common.settings import Settings, load_settings
 from services.sim.twin import ground_truth as gt
 from services.sim.twin.camera import DEPTH_SCALE, TwinCamera
 from services.sim.twin.engine import TwinEngine, create_twin_engine
-from services.vision.camera import CameraIntrinsics, RGBDFrame
 
 Array = np.ndarray
 

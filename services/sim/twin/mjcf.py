@@ -19,7 +19,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from services.common.settings import GripperSettings, TwinCameraSettings, TwinPhysicsSettings
-from services.motion.robot_models import RobotSpec
+from services.kinematics.robot_models import RobotSpec
 from services.sim.twin.scene import COLORS_RGBA, Scene, SceneObject, hollow_tube_inertia
 
 Array = np.ndarray

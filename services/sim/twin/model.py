@@ -9,7 +9,7 @@ import numpy as np
 
 from services.common.errors import ConfigurationError
 from services.common.settings import GripperSettings, Settings, TwinSettings
-from services.motion.robot_models import RobotSpec, get_robot
+from services.kinematics.robot_models import RobotSpec, get_robot
 from services.sim.twin import mjcf
 from services.sim.twin.calibration_board import add_calibration_board
 from services.sim.twin.scene import Scene, sample_scene

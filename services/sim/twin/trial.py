@@ -17,8 +17,8 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from services.common.errors import CollisionDetectedError, IKFailureError
 from services.common.frames import invert_transform, make_transform
-from services.motion.analytic import fk, fk_all, ik_all, nearest_equivalent, solutions_within_limits
-from services.motion.robot_models import RobotSpec
+from services.kinematics.analytic import fk, fk_all, ik_all, nearest_equivalent, solutions_within_limits
+from services.kinematics.robot_models import RobotSpec
 from services.sim.engine import EngineState
 from services.sim.twin import ground_truth as gt
 from services.sim.twin.engine import TOOL_DO_SHIFT, TwinEngine

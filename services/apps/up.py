@@ -1,0 +1,223 @@
+"""``pickplace up``: the whole cell in one process on the embedded defaults.
+
+The simulated Nova5 twin behind the Dobot protocol, the simulated RealSense, the
+vision, grasp, motion, robot-driver and task services on loopback, and a live
+terminal display of the pick cycle (state, cycles, success rate, cycle time) with
+a summary when it stops. ``job="keypose"`` runs seed 003's key-pose cycle on the
+kinematic simulator instead (no vision, no objects).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import logging
+import time
+
+from rich.console import Console, Group
+from rich.live import Live
+from rich.table import Table
+from rich.text import Text
+
+from services.apps.cell import Cell
+from services.common.bus import Bus
+from services.common.settings import Settings
+from services.robot.demo_cycle import CycleEvent, CycleReport, run_keypose_cycle
+from services.robot.service import RobotService
+from services.sim.app import build_sim_server
+from services.task.states import PickOutcome, TaskCounters
+
+log = logging.getLogger("pickplace.app")
+
+
+async def run_all_in_one(
+    settings: Settings,
+    cycles: int = 0,
+    engine: str | None = None,
+    console: Console | None = None,
+    job: str = "pick",
+) -> object:
+    console = console or Console()
+    if job == "keypose":
+        return await run_keypose_demo(settings, cycles or 2, engine or "kinematic", console)
+    return await run_pick_cell(settings, cycles, console)
+
+
+# ---------------------------------------------------------------------------- the pick cell
+def _status_table(runner, started: float, last: PickOutcome | None) -> Group:  # type: ignore[no-untyped-def]
+    c: TaskCounters = runner.counters
+    n = c.picks_completed + c.picks_failed
+    t = Table.grid(padding=(0, 2))
+    t.add_row(
+        "task",
+        f"[bold]{runner.task}[/bold]",
+        "state",
+        f"[cyan]{runner.state.value}[/cyan] {runner.message[:48]}",
+    )
+    t.add_row(
+        "cycles", str(n), "success", f"{c.picks_completed}/{n} ({100 * c.success_rate:.0f} %)" if n else "-"
+    )
+    t.add_row(
+        "avg cycle",
+        f"{c.average_cycle_time:.1f} s" if c.cycle_times_s else "-",
+        "running for",
+        f"{time.perf_counter() - started:.0f} s",
+    )
+    lines = [t]
+    if last is not None:
+        colour = "green" if last.success else "red"
+        lines.append(
+            Text.from_markup(
+                f"last: [{colour}]{'success' if last.success else 'failed'}[/{colour}] in {last.cycle_time_s:.1f} s"
+                + ("" if last.success else f" — {last.stage_reached}: {last.failure_reason[:90]}")
+            )
+        )
+    return Group(*lines)
+
+
+async def run_pick_cell(settings: Settings, cycles: int, console: Console) -> TaskCounters:
+    started = time.perf_counter()
+    last: list[PickOutcome] = []
+    from gateway.server import embedded_gateway
+
+    async with (
+        Cell(settings, engine="twin") as cell,
+        embedded_gateway(cell.settings, cell.bus, calibration_executor=_calibration_executor(cell)) as (
+            _gw,
+            url,
+        ),
+    ):
+        runner = cell.task.runner  # type: ignore[union-attr]
+        runner.listeners.append(last.append)
+        s = cell.settings
+        console.print(f"dashboard: [link={url}]{url}[/link]")
+        console.print(
+            f"[bold]pickplace[/bold] cell [cyan]{s.cell_id}[/cyan]: simulated {s.robot.model} twin on "
+            f"127.0.0.1:{cell.sim.ports['dashboard']} (seed {cell.seed}), gRPC robot {s.grpc.robot_port} / "  # type: ignore[union-attr]
+            f"task {s.grpc.task_port}, Zenoh {s.zenoh.listen}; calibration: {cell.vision.calibration_source}"  # type: ignore[union-attr]
+        )
+        console.print("Ctrl-C stops after a summary. Another terminal: [green]pickplace robot watch[/green]")
+        runner.start(cycles=cycles)
+        try:
+            with Live(_status_table(runner, started, None), console=console, refresh_per_second=4) as live:
+                while runner.running:
+                    await asyncio.sleep(0.25)
+                    live.update(_status_table(runner, started, last[-1] if last else None))
+                live.update(_status_table(runner, started, last[-1] if last else None))
+        finally:
+            with contextlib.suppress(Exception):
+                await runner.stop()
+            _pick_summary(console, runner.counters, runner.outcomes)
+        return runner.counters
+
+
+def _calibration_executor(cell: Cell):  # type: ignore[no-untyped-def]
+    """POST /calibration/handshake in the embedded cell: the eye-to-hand routine with the board held by
+    the gripper (in the twin: ``sim.twin.calibration_board: true``), on the cell's own camera and robot.
+    The result is stored by the gateway; the calibration file is written only by `pickplace calibrate`."""
+    from gateway.calibration import CalibrationOutcome
+    from services.apps.vision_cli import GrpcCalibrationRobot
+    from services.common.errors import InvalidInputError
+    from services.vision.calibrate_workflow import run_calibration
+
+    async def execute(num_poses: int, progress) -> CalibrationOutcome:  # type: ignore[no-untyped-def]
+        runner = cell.task.runner  # type: ignore[union-attr]
+        if runner.running:
+            raise InvalidInputError("stop the task before calibrating: the arm is busy")
+        s = cell.settings
+        cal = s.vision.calibration.model_copy(update={"n_poses": num_poses})
+        guess = cell.vision.T_base_camera  # type: ignore[union-attr]
+        if guess is None:
+            raise InvalidInputError(
+                "calibration needs a rough camera pose: write one with `pickplace calibrate-manual`"
+            )
+        async with GrpcCalibrationRobot(s, speed_ratio=30) as robot:
+            result, _data = await run_calibration(
+                robot,
+                cell.vision.camera,
+                cal,
+                guess,  # type: ignore[union-attr]
+                progress=lambda done, total, msg: progress(done / max(total, 1), msg),
+            )
+        return CalibrationOutcome(
+            parameters={
+                "T_base_camera": result.T_base_camera.tolist(),
+                "poses_used": result.n_poses,
+                "method": result.method,
+                "translation_rms_m": result.translation_rms_m,
+                "rotation_rms_deg": result.rotation_rms_deg,
+            },
+            reprojection_error=result.reprojection_rms_px,
+            notes="eye-to-hand, ChArUco board held by the gripper",
+        )
+
+    return execute
+
+
+def _pick_summary(console: Console, c: TaskCounters, outcomes: list[PickOutcome]) -> None:
+    n = c.picks_completed + c.picks_failed
+    t = Table(title="summary")
+    t.add_column("metric")
+    t.add_column("value", justify="right")
+    t.add_row("cycles", str(n))
+    t.add_row("successful picks", f"{c.picks_completed} ({100 * c.success_rate:.0f} %)" if n else "0")
+    if c.cycle_times_s:
+        t.add_row("mean cycle time", f"{c.average_cycle_time:.2f} s")
+    failures: dict[str, int] = {}
+    for o in outcomes:
+        if not o.success:
+            key = f"{o.stage_reached}: {o.error_code or 'failed'}"
+            failures[key] = failures.get(key, 0) + 1
+    for key, count in sorted(failures.items(), key=lambda kv: -kv[1]):
+        t.add_row(f"failed at {key}", str(count))
+    console.print(t)
+
+
+# ---------------------------------------------------------------------------- key-pose demo
+async def run_keypose_demo(settings: Settings, cycles: int, engine: str, console: Console) -> CycleReport:
+    total = CycleReport()
+    async with build_sim_server(settings, engine) as sim:
+        r = settings.robot
+        settings = settings.model_copy(
+            update={
+                "robot": r.model_copy(
+                    update={"dashboard_port": sim.ports["dashboard"], "feedback_port": sim.ports["feedback"]}
+                )
+            }
+        )
+        async with Bus(settings.zenoh) as bus, RobotService(settings, bus) as svc:
+            console.print(
+                f"key-pose cycle on the simulated {settings.robot.model} ({engine}); gRPC "
+                f"{settings.grpc.host}:{svc.grpc_port}, Zenoh {settings.zenoh.listen}"
+            )
+            await svc.driver.enable()
+
+            def show(ev: CycleEvent) -> None:
+                console.print(
+                    f"cycle {ev.cycle} [{ev.step}/{ev.steps}] → [bold]{ev.pose:<10}[/bold] "
+                    f"in {ev.duration_s:5.2f}s (error {ev.position_error_deg:.3f}°)"
+                )
+
+            try:
+                for _ in itertools.islice(itertools.count(), cycles):
+                    # svc.settings follows PUT /config: a changed cycle or speed applies from the next cycle
+                    rep = await run_keypose_cycle(
+                        svc.driver, svc.settings.cycle, 1, svc.settings.robot.speed_ratio, show
+                    )
+                    total.cycles += rep.cycles
+                    total.moves += rep.moves
+                    total.cycle_times_s += rep.cycle_times_s
+                    total.max_position_error_deg = max(
+                        total.max_position_error_deg, rep.max_position_error_deg
+                    )
+            finally:
+                t = Table(title="summary")
+                t.add_column("metric")
+                t.add_column("value", justify="right")
+                t.add_row("cycles", str(total.cycles))
+                t.add_row("moves", str(total.moves))
+                t.add_row("max end-of-move error", f"{total.max_position_error_deg:.3f}°")
+                t.add_row("joint states published", str(svc.hub.published))
+                console.print(t)
+    return total

@@ -1,0 +1,13 @@
+"""The shared robot library, pure (no I/O beyond reading the robot description files).
+
+- ``robot_models``: DH tables and joint limits (``get_robot``, ``NOVA5``, ``UR5E``, ``UR3``).
+- ``analytic``: closed-form FK/IK for the UR-structure arms (numpy only).
+- ``model``: pinocchio models of each arm with its tool, FK, Jacobians, analytic and numerical IK.
+- ``urdf``: URDF text of each arm with its tool (``config/robots/*.urdf``).
+- ``cartesian``: straight tool lines with jump detection.
+- ``poses``: pose validation and display helpers.
+- ``trajectory``: ``JointTrajectory``, ``JointLimits``, interpolation, and the independent limit check.
+- ``collision``: coal collision model of the arm, table, boxes and an attached object.
+
+Used by every service that reasons about the arm (grasp, motion, robot driver, task, simulator).
+"""

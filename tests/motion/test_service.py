@@ -1,0 +1,204 @@
+"""The MotionPlanner gRPC service over a real loopback channel."""
+
+from __future__ import annotations
+
+import math
+
+import grpc
+import numpy as np
+import pytest
+from pickplace.v1 import common_pb2, motion_pb2, motion_pb2_grpc
+
+from services.common import grpc_util
+from services.common.errors import CollisionError, IKFailureError, InvalidInputError
+from services.common.frames import make_transform
+from services.common.messages import matrix_to_pose, pose_to_matrix
+from services.kinematics.model import Kinematics, load_arm
+from services.kinematics.trajectory import JointLimits, JointTrajectory, verify_trajectory
+from services.kinematics.urdf import tool_geometry
+from services.motion.service import build_server
+
+pytestmark = pytest.mark.integration
+
+DOWN = np.diag([1.0, -1.0, -1.0])
+Q_PICK = np.deg2rad([162.5, 22.6, 129.3, -61.9, -90.0, -107.5])
+Q_PLACE = Q_PICK + np.deg2rad([70, 0, 0, 0, 0, 0])
+WALL = motion_pb2.CollisionBox(
+    name="wall", x_min=0.25, x_max=0.60, y_min=0.20, y_max=0.26, z_min=0.0, z_max=0.25
+)
+
+
+@pytest.fixture
+async def stub(settings):
+    server, port = build_server(settings, 0)
+    await server.start()
+    try:
+        async with grpc_util.channel("127.0.0.1", port) as ch:
+            yield motion_pb2_grpc.MotionPlannerStub(ch)
+    finally:
+        await server.stop(0)
+
+
+@pytest.fixture
+def kin(settings):
+    return Kinematics(load_arm(settings.robot.model, tool_geometry(settings)))
+
+
+async def test_plan_joints_around_a_wall(stub, kin):
+    req = motion_pb2.PlanJointsRequest(
+        start=Q_PICK.tolist(),
+        goal=Q_PLACE.tolist(),
+        scene=motion_pb2.PlanningScene(boxes=[WALL]),
+        options=motion_pb2.MotionOptions(planning_time_s=5.0),
+    )
+    resp = await stub.PlanJoints(req)
+    assert resp.planner == "RRTConnect"
+    traj = JointTrajectory.from_proto(resp.trajectory)
+    assert np.allclose(traj.positions[0], Q_PICK) and np.allclose(traj.positions[-1], Q_PLACE)
+    assert resp.duration_s == pytest.approx(traj.duration)
+    verify_trajectory(traj, JointLimits.from_spec(kin.spec), start=Q_PICK, goal=Q_PLACE)
+    # the service's own check agrees, and without the wall it is direct
+    check = await stub.CheckTrajectory(
+        motion_pb2.CheckTrajectoryRequest(
+            trajectory=resp.trajectory, scene=motion_pb2.PlanningScene(boxes=[WALL])
+        )
+    )
+    assert check.ok, check.message
+    direct = await stub.PlanJoints(motion_pb2.PlanJointsRequest(start=Q_PICK.tolist(), goal=Q_PLACE.tolist()))
+    assert direct.planner == "direct"
+    # the direct trajectory does hit the wall
+    hit = await stub.CheckTrajectory(
+        motion_pb2.CheckTrajectoryRequest(
+            trajectory=direct.trajectory, scene=motion_pb2.PlanningScene(boxes=[WALL])
+        )
+    )
+    assert not hit.ok and "wall" in hit.message and hit.collision_time_s > 0
+
+
+async def test_solve_ik_and_plan_to_pose(stub, kin):
+    target = make_transform(DOWN, [0.40, -0.20, 0.10])
+    resp = await stub.SolveIK(motion_pb2.SolveIKRequest(target=matrix_to_pose(target), seed=Q_PICK.tolist()))
+    assert resp.method == "analytic" and len(resp.solutions) >= 2
+    assert np.allclose(kin.fk(np.array(resp.best.positions)), target, atol=2e-5)
+    assert resp.best.manipulability > 0
+    numeric = await stub.SolveIK(
+        motion_pb2.SolveIKRequest(target=matrix_to_pose(target), seed=Q_PICK.tolist(), method="numeric")
+    )
+    assert numeric.method == "numeric" and numeric.position_error < 1e-6
+    plan = await stub.PlanJoints(
+        motion_pb2.PlanJointsRequest(start=Q_PICK.tolist(), goal_pose=matrix_to_pose(target))
+    )
+    end = JointTrajectory.from_proto(plan.trajectory).positions[-1]
+    assert np.allclose(kin.fk(end), target, atol=2e-5)
+
+
+async def test_plan_cartesian_and_waypoints(stub, kin):
+    top = kin.fk(Q_PICK)
+    low = top.copy()
+    low[2, 3] -= 0.05
+    cart = await stub.PlanCartesian(
+        motion_pb2.PlanCartesianRequest(start=Q_PICK.tolist(), poses=[matrix_to_pose(low)])
+    )
+    assert cart.planner == "cartesian" and cart.path_points > 2
+    assert np.allclose(kin.fk(JointTrajectory.from_proto(cart.trajectory).positions[-1]), low, atol=2e-5)
+    wps = [
+        motion_pb2.MotionWaypoint(
+            motion=motion_pb2.MotionWaypoint.LINEAR, pose=matrix_to_pose(low), label="grasp"
+        ),
+        motion_pb2.MotionWaypoint(
+            motion=motion_pb2.MotionWaypoint.LINEAR, pose=matrix_to_pose(top), label="lift"
+        ),
+        motion_pb2.MotionWaypoint(
+            motion=motion_pb2.MotionWaypoint.JOINT, joints=Q_PLACE.tolist(), label="place"
+        ),
+    ]
+    resp = await stub.PlanWaypoints(
+        motion_pb2.PlanWaypointsRequest(
+            start=Q_PICK.tolist(),
+            waypoints=wps,
+            scene=motion_pb2.PlanningScene(boxes=[WALL]),
+            options=motion_pb2.MotionOptions(planning_time_s=5.0),
+        )
+    )
+    assert resp.planner.split("+") == ["cartesian", "cartesian", "RRTConnect"]
+    traj = JointTrajectory.from_proto(resp.trajectory)
+    assert np.allclose(traj.positions[-1], Q_PLACE)
+
+
+async def test_attached_object_and_allowed_pairs_reach_the_planner(stub):
+    across = make_transform(np.array([[0, 0, 1.0], [0, 1.0, 0], [-1.0, 0, 0]]), [0, 0, 0])
+    scene = motion_pb2.PlanningScene(
+        boxes=[WALL],
+        attached=motion_pb2.AttachedObject(
+            shape=motion_pb2.AttachedObject.CYLINDER,
+            radius=0.011,
+            length=0.2,
+            tool_to_object=matrix_to_pose(across),
+        ),
+        allowed=[motion_pb2.AllowedCollision(a="attached", b="table")],
+    )
+    resp = await stub.PlanJoints(
+        motion_pb2.PlanJointsRequest(
+            start=Q_PICK.tolist(),
+            goal=Q_PLACE.tolist(),
+            scene=scene,
+            options=motion_pb2.MotionOptions(planning_time_s=5.0),
+        )
+    )
+    assert resp.planner == "RRTConnect"
+
+
+async def _error(call, request):
+    with pytest.raises(grpc.aio.AioRpcError) as info:
+        await call(request)
+    return info.value
+
+
+async def test_errors_cross_the_wire_with_their_names(stub):
+    far = make_transform(DOWN, [1.6, 0.0, 0.3])
+    err = await _error(
+        stub.SolveIK, motion_pb2.SolveIKRequest(target=matrix_to_pose(far), seed=Q_PICK.tolist())
+    )
+    assert err.code() == grpc.StatusCode.FAILED_PRECONDITION
+    assert "1.6000" in err.details()
+    assert isinstance(grpc_util.translate(err), IKFailureError)
+
+    err = await _error(
+        stub.PlanJoints, motion_pb2.PlanJointsRequest(start=[math.nan] * 6, goal=Q_PLACE.tolist())
+    )
+    assert err.code() == grpc.StatusCode.INVALID_ARGUMENT and "NaN" in err.details()
+    assert isinstance(grpc_util.translate(err), InvalidInputError)
+
+    err = await _error(
+        stub.PlanJoints, motion_pb2.PlanJointsRequest(start=Q_PICK.tolist(), goal=[0, 0, 9.0, 0, 0, 0])
+    )
+    assert err.code() == grpc.StatusCode.INVALID_ARGUMENT and "joint 3" in err.details()
+
+    err = await _error(
+        stub.SolveIK, motion_pb2.SolveIKRequest(target=common_pb2.Pose(x=0.3), seed=Q_PICK.tolist())
+    )
+    assert err.code() == grpc.StatusCode.INVALID_ARGUMENT and "quaternion" in err.details()
+
+    box = motion_pb2.CollisionBox(x_min=0.3, x_max=0.6, y_min=-0.1, y_max=0.1, z_min=0.0, z_max=0.2)
+    err = await _error(
+        stub.PlanJoints,
+        motion_pb2.PlanJointsRequest(
+            start=Q_PICK.tolist(), goal=Q_PLACE.tolist(), scene=motion_pb2.PlanningScene(boxes=[box])
+        ),
+    )
+    assert isinstance(grpc_util.translate(err), CollisionError) and "box0" in err.details()
+
+    err = await _error(
+        stub.PlanJoints,
+        motion_pb2.PlanJointsRequest(
+            start=Q_PICK.tolist(), goal=Q_PLACE.tolist(), options=motion_pb2.MotionOptions(robot_model="kuka")
+        ),
+    )
+    assert err.code() == grpc.StatusCode.INVALID_ARGUMENT and "kuka" in err.details()
+
+
+def test_pose_conversion_round_trip():
+    T = make_transform(DOWN, [0.1, -0.2, 0.3])
+    assert np.allclose(pose_to_matrix(matrix_to_pose(T)), T)
+    with pytest.raises(InvalidInputError, match="NaN"):
+        pose_to_matrix(common_pb2.Pose(x=math.nan, qw=1.0))

@@ -1,0 +1,193 @@
+"""The simulated controller's protocol semantics, driven directly (no sockets)."""
+
+import numpy as np
+import pytest
+
+from services.common.frames import dobot_pose_to_transform
+from services.dobot import protocol as P
+from services.kinematics import analytic
+from services.kinematics.robot_models import NOVA5
+from services.sim.controller import SimController
+from services.sim.engine import KinematicEngine
+
+HOME = np.deg2rad([0, 0, 90, 0, -90, 0])
+
+
+@pytest.fixture
+def ctrl() -> SimController:
+    c = SimController(NOVA5, KinematicEngine(), q0=HOME, clock_ms=lambda: 1_700_000_000_000)
+    assert c.handle("EnableRobot()").startswith("0,")
+    return c
+
+
+def run(c: SimController, seconds: float, dt: float = 0.008) -> None:
+    for _ in range(round(seconds / dt)):
+        c.tick(dt)
+
+
+def reply(c: SimController, cmd: str) -> P.Reply:
+    return P.parse_reply(c.handle(cmd))
+
+
+def test_disabled_until_enabled():
+    c = SimController(NOVA5, KinematicEngine(), q0=HOME)
+    assert reply(c, "RobotMode()").floats() == [4]
+    assert reply(c, "MovJ(joint={0,0,90,0,-90,0})").error_id == -1  # not enabled
+    assert reply(c, "ENABLEROBOT()").ok  # names are case-insensitive
+    assert reply(c, "RobotMode()").floats() == [5]
+
+
+def test_movj_runs_queue_ids_and_modes(ctrl):
+    r1 = reply(ctrl, "MovJ(joint={10,20,30,40,50,60})")
+    r2 = reply(ctrl, "MovJ(joint={0,0,90,0,-90,0},v=100,a=100)")
+    assert (r1.result_id, r2.result_id) == (1, 2)
+    ctrl.tick(0.008)
+    assert ctrl.mode == P.RobotMode.RUNNING and ctrl.current_cmd_id == 1
+    run(ctrl, 10)
+    assert ctrl.mode == P.RobotMode.ENABLE and ctrl.current_cmd_id == 2
+    assert np.allclose(reply(ctrl, "GetAngle()").floats(), [0, 0, 90, 0, -90, 0], atol=1e-6)
+
+
+def test_movj_respects_speed_limits(ctrl):
+    reply(ctrl, "MovJ(joint={90,0,90,0,-90,0},v=100)")
+    speeds = []
+    for _ in range(400):
+        ctrl.tick(0.008)
+        speeds.append(np.abs(ctrl.qd_ref))
+    vmax = np.minimum(NOVA5.max_velocity, np.deg2rad(ctrl.config.max_joint_speed_deg_s))
+    assert np.max(np.array(speeds) / vmax) <= 1.0 + 1e-9
+    assert np.isclose(np.rad2deg(ctrl.measured.q[0]), 90, atol=1e-6)
+
+
+def test_feedback_consistent_with_fk(ctrl):
+    reply(ctrl, "MovJ(joint={10,20,30,40,50,60})")
+    run(ctrl, 5)
+    rec = P.decode_feedback(ctrl.feedback_bytes())
+    q = np.deg2rad(rec["QActual"])
+    T = dobot_pose_to_transform(rec["ToolVectorActual"])
+    assert np.allclose(T, analytic.fk(NOVA5, q), atol=1e-9)
+    # spec reference: q = (10,20,30,40,50,60)° → (−468.557, −277.357, 895.660) mm
+    assert np.allclose(rec["ToolVectorActual"][:3], [-468.557, -277.357, 895.660], atol=0.01)
+    assert int(rec["EnableStatus"]) == 1 and int(rec["CRRobotType"]) == 103
+    assert int(rec["TimeStamp"]) == 1_700_000_000_000
+
+
+def test_joint_limit_alarm_then_clear(ctrl):
+    assert reply(ctrl, "MovJ(joint={0,0,170,0,0,0})").ok  # J3 limit is ±159.9°
+    ctrl.tick(0.008)
+    assert ctrl.mode == P.RobotMode.ERROR
+    assert P.parse_error_ids(reply(ctrl, "GetErrorID()").values_text) == [68]
+    assert reply(ctrl, "GetAngle()").error_id == -2  # refused in alarm
+    assert reply(ctrl, "MovJ(joint={0,0,90,0,-90,0})").error_id == -2
+    assert reply(ctrl, "ClearError()").ok
+    assert ctrl.mode == P.RobotMode.ENABLE
+    assert reply(ctrl, "MovJ(joint={0,0,100,0,-90,0})").ok
+
+
+def test_unreachable_pose_alarms(ctrl):
+    assert reply(ctrl, "MovJ(pose={2000,0,300,180,0,0})").ok
+    ctrl.tick(0.008)
+    assert ctrl.mode == P.RobotMode.ERROR
+    assert P.parse_error_ids(reply(ctrl, "GetErrorID()").values_text) == [17]
+
+
+def test_movl_follows_a_straight_line(ctrl):
+    start = reply(ctrl, "GetPose()").floats()
+    goal = list(start)
+    goal[0] += 100.0
+    goal[2] -= 80.0
+    assert reply(ctrl, "MovL(pose={" + ",".join(f"{v:f}" for v in goal) + "})").ok
+    pts = []
+    for _ in range(500):
+        ctrl.tick(0.008)
+        pts.append(analytic.fk(NOVA5, ctrl.measured.q)[:3, 3] * 1000)
+    pts = np.array(pts)
+    a, b = np.array(start[:3]), np.array(goal[:3])
+    d = (b - a) / np.linalg.norm(b - a)
+    off_line = np.linalg.norm((pts - a) - np.outer((pts - a) @ d, d), axis=1)
+    assert off_line.max() < 1.0  # mm
+    assert np.allclose(pts[-1], b, atol=1e-3)
+
+
+def test_malformed_commands_get_protocol_codes(ctrl):
+    assert reply(ctrl, "Sync()").error_id == -10000  # not in V4
+    assert reply(ctrl, "MovJ(joint={999,0,0,0,0,0})").error_id == -40001
+    assert reply(ctrl, "MovJ(joint={a,0,0,0,0,0})").error_id == -30001
+    assert reply(ctrl, "SpeedFactor()").error_id == -20000
+    assert reply(ctrl, "SpeedFactor(200)").error_id == -40001
+    assert reply(ctrl, "MovJ(joint={0,0,90,0,-90,0},a=200)").error_id == -60001
+    assert reply(ctrl, "DO(1)").error_id == -20000
+    assert reply(ctrl, "RobotMode()").ok  # still serving
+
+
+def test_estop_gates_commands(ctrl):
+    reply(ctrl, "MovJ(joint={90,0,90,0,-90,0})")
+    run(ctrl, 0.2)
+    assert reply(ctrl, "EmergencyStop(1)").ok
+    q_stop = ctrl.measured.q.copy()
+    run(ctrl, 0.5)
+    assert np.allclose(ctrl.measured.q, q_stop)  # nothing moves
+    assert reply(ctrl, "EnableRobot()").error_id == -3
+    assert reply(ctrl, "ClearError()").error_id == -3  # release first
+    assert 116 in P.parse_error_ids(reply(ctrl, "GetErrorID()").values_text)
+    assert reply(ctrl, "EmergencyStop(0)").ok
+    assert reply(ctrl, "ClearError()").ok
+    assert reply(ctrl, "EnableRobot()").ok
+    assert ctrl.mode == P.RobotMode.ENABLE
+
+
+def test_stop_clears_queue(ctrl):
+    reply(ctrl, "MovJ(joint={90,0,90,0,-90,0})")
+    reply(ctrl, "MovJ(joint={-90,0,90,0,-90,0})")
+    run(ctrl, 0.1)
+    assert reply(ctrl, "Stop()").ok
+    run(ctrl, 0.1)
+    assert ctrl.mode == P.RobotMode.ENABLE and not ctrl.queue
+
+
+def test_do_is_queued_and_reaches_engine(ctrl):
+    outputs: list[int] = []
+
+    class Recorder(KinematicEngine):
+        def set_digital_outputs(self, mask: int) -> None:
+            outputs.append(mask)
+
+    c = SimController(NOVA5, Recorder(), q0=HOME)
+    c.handle("EnableRobot()")
+    c.handle("MovJ(joint={10,0,90,0,-90,0})")
+    rid = P.parse_reply(c.handle("DO(1,1)")).result_id
+    assert rid == 2 and (c.do_mask & 1) == 0  # waits behind the move
+    run(c, 3)
+    assert c.do_mask & 1 and outputs[-1] & 1
+    assert P.parse_reply(c.handle("GetDO(1)")).floats() == [1]
+    c.handle("ToolDOInstant(1,1)")
+    assert outputs[-1] >> 32 & 1  # flange outputs sit above bit 32
+
+
+def test_servoj_overspeed_alarms(ctrl):
+    assert reply(ctrl, "ServoJ(90,0,90,0,-90,0,t=0.01)").ok
+    ctrl.tick(0.008)
+    assert 48 in P.parse_error_ids(reply(ctrl, "GetErrorID()").values_text)
+
+
+def test_inverse_and_positive_kin(ctrl):
+    pose = reply(ctrl, "PositiveKin(10,20,30,40,50,60)").floats()
+    q = reply(
+        ctrl,
+        "InverseKin(" + ",".join(f"{v:f}" for v in pose) + ",useJointNear=1,jointNear={10,20,30,40,50,60})",
+    )
+    assert np.allclose(q.floats(), [10, 20, 30, 40, 50, 60], atol=1e-6)
+
+
+def test_collision_from_engine_raises_117():
+    class Crashing(KinematicEngine):
+        def step(self, dt, q_ref, qd_ref, qdd_ref):  # type: ignore[no-untyped-def]
+            st = super().step(dt, q_ref, qd_ref, qdd_ref)
+            st.collision = "link4 hit the table"
+            return st
+
+    c = SimController(NOVA5, Crashing(), q0=HOME)
+    c.handle("EnableRobot()")
+    c.tick(0.008)
+    assert c.mode == P.RobotMode.COLLISION
+    assert P.parse_error_ids(P.parse_reply(c.handle("GetErrorID()")).values_text) == [117]

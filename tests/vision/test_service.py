@@ -1,0 +1,230 @@
+"""The vision service over a real loopback gRPC channel and Zenoh session; camera sources."""
+
+from __future__ import annotations
+
+import asyncio
+import sys
+import types
+
+import numpy as np
+import pytest
+from pickplace.v1 import vision_pb2, vision_pb2_grpc
+from prometheus_client import CollectorRegistry
+
+from services.common.bus import Bus
+from services.common.errors import (
+    CameraConnectionError,
+    ConfigurationError,
+    InvalidFrameError,
+    ObjectNotDetectedError,
+)
+from services.common.grpc_util import channel, rpc_errors
+from services.common.keys import CellKeys
+from services.common.metrics import CellMetrics
+from services.common.sensors import frame_to_msg, msg_to_frame, publish_camera_frames
+from services.common.settings import CameraSourceSettings
+from services.vision.realsense import RealSenseCamera
+from services.vision.replay import ReplayCamera, record_frames
+from services.vision.service import VisionService, load_T_base_camera, make_camera
+from services.vision.synthetic import NoiseModel, random_scene, render_scene
+
+pytestmark = pytest.mark.integration
+
+
+class SceneCamera:
+    """A camera that shows one synthetic scene, re-noised every frame."""
+
+    def __init__(self, seed: int):
+        self.scene = random_scene(seed, n_rods=1, cube_colors=("red", "green"), obstacle=True)
+        self.n = 0
+
+    @property
+    def intrinsics(self):  # type: ignore[no-untyped-def]
+        return self.scene.intrinsics
+
+    def capture(self):  # type: ignore[no-untyped-def]
+        self.n += 1
+        frame = render_scene(self.scene, NoiseModel(), seed=self.n).frame
+        return type(frame)(frame.color, frame.depth, frame.intrinsics, stamp_ns=self.n, seq=self.n)
+
+    def close(self) -> None:
+        pass
+
+
+def _vision_settings(settings, **camera):  # type: ignore[no-untyped-def]
+    v = settings.vision.model_copy(update={"camera": CameraSourceSettings(**camera)} if camera else {})
+    return settings.model_copy(update={"vision": v})
+
+
+async def test_detect_over_grpc_in_camera_and_base_frames(settings):
+    cam = SceneCamera(31)
+    T = cam.scene.T_base_camera
+    metrics = CellMetrics(CollectorRegistry())
+    async with (
+        VisionService(
+            settings, None, cam, grpc_port=0, metrics=metrics, T_base_camera=T, publish_loop=False
+        ) as svc,
+        channel("127.0.0.1", svc.grpc_port) as ch,
+    ):
+        stub = vision_pb2_grpc.VisionStub(ch)
+        with pytest.raises(ObjectNotDetectedError, match="no frame has been processed"), rpc_errors():
+            await stub.GetDebugImage(vision_pb2.DebugImageRequest())
+        reply = await stub.Detect(vision_pb2.DetectRequest(include_debug_image=True))
+        objs = reply.objects
+        assert objs.rod_detected and objs.calibrated and len(objs.rods) == 1
+        rod = objs.rods[0]
+        truth = cam.scene.rods[0]
+        centre = np.array([rod.center_base.x, rod.center_base.y, rod.center_base.z])
+        assert rod.has_base and np.linalg.norm(centre - np.asarray(truth.center)) < 0.003
+        axis = np.array([rod.axis_base.x, rod.axis_base.y, rod.axis_base.z])
+        assert abs(axis @ truth.axis) > np.cos(np.deg2rad(2))
+        cam_centre = np.array([rod.center_camera.x, rod.center_camera.y, rod.center_camera.z])
+        np.testing.assert_allclose(T[:3, :3] @ cam_centre + T[:3, 3], centre, atol=1e-9)
+        assert sorted(c.color_label for c in objs.cubes) == ["green", "red"]
+        assert len(objs.obstacles) == 1 and objs.obstacles[0].has_base
+        assert {"capture", "plane", "rod_pose", "cube_pose", "total"} <= set(objs.timings_ms)
+        assert reply.debug_jpeg[:2] == b"\xff\xd8"
+        image = await stub.GetDebugImage(vision_pb2.DebugImageRequest())
+        assert image.jpeg == reply.debug_jpeg and image.header.seq == cam.n
+
+        # a frame sent in the request is used instead of the camera's
+        empty = random_scene(32, n_rods=0)
+        frame = render_scene(empty, seed=1).frame
+        reply = await stub.Detect(vision_pb2.DetectRequest(frame=frame_to_msg(frame)))
+        assert not reply.objects.rod_detected and "rod not detected" in reply.objects.notes[0]
+
+        # a malformed frame is a clear error on the client side, not a crash
+        bad = frame_to_msg(frame)
+        bad.depth_u16 = bad.depth_u16[:100]
+        with pytest.raises(InvalidFrameError, match="depth payload"), rpc_errors():
+            await stub.Detect(vision_pb2.DetectRequest(frame=bad))
+        zero = frame_to_msg(frame)
+        zero.depth_u16 = bytes(len(zero.depth_u16))
+        with pytest.raises(InvalidFrameError, match="no valid pixels"), rpc_errors():
+            await stub.Detect(vision_pb2.DetectRequest(frame=zero))
+
+    samples = {
+        (s.labels.get("stage"), s.name): s.value for m in metrics.registry.collect() for s in m.samples
+    }
+    for stage in ("capture", "segmentation", "pose", "total"):
+        assert samples[(stage, "vision_latency_seconds_count")] >= 2
+
+
+async def test_publishes_detections_from_the_zenoh_frame_stream(settings):
+    cam = SceneCamera(33)
+    keys = CellKeys(settings.cell_id)
+    async with Bus(settings.zenoh) as bus:
+        objects = bus.subscribe(keys.detected_objects, vision_pb2.DetectedObjects)
+        images = bus.subscribe(keys.vision_debug_image, vision_pb2.DebugImage)
+        svc = VisionService(
+            settings,
+            bus,
+            None,
+            grpc_port=0,
+            metrics=CellMetrics(CollectorRegistry()),
+            T_base_camera=cam.scene.T_base_camera,
+        )
+        stop = asyncio.Event()
+        async with svc:
+            feeder = asyncio.create_task(publish_camera_frames(cam, bus, keys.camera_frames, 5.0, stop))
+            msg = await objects.get(timeout_s=20.0)
+            img = await images.get(timeout_s=20.0)
+            stop.set()
+            await feeder
+        objects.close()
+        images.close()
+    assert msg.rod_detected and msg.calibrated and len(msg.cubes) == 2
+    assert msg.header.seq >= 1 and img.jpeg[:2] == b"\xff\xd8"
+    assert svc.published >= 1
+
+
+async def test_without_a_frame_source_detect_says_so(settings):
+    async with (
+        VisionService(
+            settings, None, None, grpc_port=0, metrics=CellMetrics(CollectorRegistry()), publish_loop=False
+        ) as svc,
+        channel("127.0.0.1", svc.grpc_port) as ch,
+    ):
+        stub = vision_pb2_grpc.VisionStub(ch)
+        with pytest.raises(CameraConnectionError, match="no camera"), rpc_errors():
+            await stub.Detect(vision_pb2.DetectRequest())
+
+
+def test_frame_message_round_trip():
+    frame = render_scene(random_scene(34, n_rods=1), seed=3).frame
+    back = msg_to_frame(frame_to_msg(frame))
+    np.testing.assert_array_equal(back.color, frame.color)
+    np.testing.assert_array_equal(back.depth, frame.depth)
+    assert back.intrinsics == frame.intrinsics and back.depth_scale == frame.depth_scale
+    msg = frame_to_msg(frame)
+    msg.intrinsics.fx = float("nan")
+    with pytest.raises(InvalidFrameError, match="intrinsics"):
+        msg_to_frame(msg)
+
+
+def test_record_and_replay_round_trip(tmp_path):
+    cam = SceneCamera(35)
+    record_frames(cam, tmp_path / "rec", 3)
+    replay = ReplayCamera(tmp_path / "rec", loop=False)
+    assert len(replay) == 3 and replay.intrinsics == cam.intrinsics and replay.ground_truth is None
+    originals = [render_scene(cam.scene, NoiseModel(), seed=k).frame for k in (1, 2, 3)]
+    for original in originals:
+        frame = replay.capture()
+        np.testing.assert_array_equal(frame.color, original.color)
+        np.testing.assert_array_equal(frame.depth, original.depth)
+    with pytest.raises(CameraConnectionError, match="end of the recording"):
+        replay.capture()
+    with pytest.raises(Exception, match="already holds recorded frames"):
+        record_frames(cam, tmp_path / "rec", 1)
+
+
+def test_replay_source_from_settings_and_its_errors(tmp_path):
+    record_frames(SceneCamera(36), tmp_path / "rec", 2)
+    cam = make_camera(CameraSourceSettings(source="replay", replay_dir=str(tmp_path / "rec")))
+    assert isinstance(cam, ReplayCamera) and cam.capture().seq == 1
+    with pytest.raises(ConfigurationError, match="replay_dir"):
+        make_camera(CameraSourceSettings(source="replay"))
+    with pytest.raises(CameraConnectionError, match="does not exist"):
+        ReplayCamera(tmp_path / "nowhere")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(CameraConnectionError, match=r"intrinsics\.json"):
+        ReplayCamera(tmp_path / "empty")
+    assert make_camera(CameraSourceSettings(source="bus")) is None
+
+
+def test_realsense_errors_are_clear(monkeypatch):
+    monkeypatch.setitem(sys.modules, "pyrealsense2", None)  # not installed
+    with pytest.raises(CameraConnectionError, match=r"pickplace\[realsense\]"):
+        RealSenseCamera.open(CameraSourceSettings(source="realsense"))
+
+    class _Context:
+        def query_devices(self):  # type: ignore[no-untyped-def]
+            return []
+
+    fake = types.SimpleNamespace(context=_Context)
+    monkeypatch.setitem(sys.modules, "pyrealsense2", fake)
+    with pytest.raises(CameraConnectionError, match="no RealSense camera attached"):
+        RealSenseCamera.open(CameraSourceSettings(source="realsense"))
+    with pytest.raises(CameraConnectionError, match="not started"):
+        RealSenseCamera(CameraSourceSettings()).capture()
+
+
+def test_calibration_source_precedence(tmp_path):
+    from services.common.settings import CalibrationSettings
+    from services.vision.calibration import calibration_record, write_calibration
+
+    none = CalibrationSettings(file=str(tmp_path / "missing.yaml"))
+    assert load_T_base_camera(none) == (None, "none (camera-frame results only)")
+    manual = CalibrationSettings(
+        file=str(tmp_path / "missing.yaml"),
+        manual_translation_m=(0.9, 0.0, 0.6),
+        manual_rpy_deg=(-145.0, 0.0, 90.0),
+    )
+    T, source = load_T_base_camera(manual)
+    assert T is not None and source.startswith("manual") and np.allclose(T[:3, 3], [0.9, 0.0, 0.6])
+    T_file = np.eye(4)
+    T_file[:3, 3] = [1.0, 0.1, 0.7]
+    write_calibration(tmp_path / "cal.yaml", calibration_record(T_file, method="test"))
+    from_file = manual.model_copy(update={"file": str(tmp_path / "cal.yaml")})
+    T, source = load_T_base_camera(from_file)
+    assert source.startswith("calibration file") and np.allclose(T, T_file)
