@@ -1,0 +1,142 @@
+"""The grasp service: jaw geometry, force closure, the rod-stand and cube-sort plans."""
+
+from __future__ import annotations
+
+from pydantic import Field, model_validator
+
+from services.common.settings.base import Model, Vec2, Vec6
+
+
+class GraspGripperSettings(Model):
+    """Jaw geometry for grasp synthesis, in the tool frame (tool z = approach, jaws close along tool y).
+
+    Defaults are the twin's gripper (``services/sim/twin/mjcf.py``): 22 × 20 mm pads centred on the
+    TCP, fingertips 10 mm beyond it; the stroke and the TCP offset are ``gripper.*``.
+    """
+
+    pad_length_m: float = Field(0.022, gt=0, le=0.2, description="pad extent along tool x")
+    pad_height_m: float = Field(
+        0.020, gt=0, le=0.2, description="pad extent along tool z, centred on the TCP"
+    )
+    finger_thickness_m: float = Field(0.014, gt=0, le=0.1, description="pad + finger, along tool y")
+    fingertip_beyond_tcp_m: float = Field(0.010, ge=0, le=0.2)
+    finger_length_m: float = Field(0.08, gt=0, le=0.5, description="palm bottom to fingertip")
+    palm_half_xy_m: Vec2 = (0.035, 0.06)
+    palm_height_m: float = Field(0.07, gt=0, le=0.5, description="palm box above the fingers")
+    width_margin_m: float = Field(0.01, ge=0, le=0.1, description="opening kept beyond the object width")
+    min_width_m: float = Field(0.004, ge=0, le=0.2)
+    table_clearance_m: float = Field(0.002, ge=0, le=0.05, description="fingertips above the table")
+    grip_force_n: float = Field(10.0, gt=0, le=500, description="target squeeze per finger")
+
+
+class ForceClosureSettings(Model):
+    """LLD §10.3: contact model of the Ferrari–Canny metric."""
+
+    friction_coefficient: float = Field(0.5, gt=0, le=3, description="LLD default 0.5")
+    cone_edges: int = Field(8, ge=3, le=32, description="friction-cone polyhedral approximation")
+    torsional_friction_m: float = Field(0.005, ge=0, le=0.1, description="soft-finger torque per newton")
+    points_per_line: int = Field(2, ge=2, le=8, description="point contacts modelling a line contact")
+
+
+class RodStandSettings(Model):
+    """Seed 001 §3.5 pick-and-stand; numbers from ``shared/specs/twin-physics-notes.md``."""
+
+    place_xy_m: Vec2 | None = Field((0.45, 0.0), description="rod base on the table; None = where it lay")
+    grasp_offset_m: float = Field(
+        0.0, ge=-0.2, le=0.2, description="grasp point along the rod from its centre"
+    )
+    offset_tolerance_m: float = Field(
+        0.03, ge=0, le=0.2, description="worst grasp offset error along the rod"
+    )
+    min_lift_m: float = Field(
+        0.15, gt=0, le=0.6, description="the notes: 0.10 strikes the table, 0.15 clears"
+    )
+    turn_clearance_m: float = Field(0.02, ge=0, le=0.2, description="lowest rod point above the table")
+    place_approach_m: float = Field(
+        0.04, gt=0, le=0.3, description="rod base above the table before the guard"
+    )
+    carry_raise_m: float = Field(
+        0.08, ge=0, le=0.5, description="carry this much above PLACE_ABOVE (clear cubes)"
+    )
+    guard_overtravel_m: float = Field(0.01, ge=0, le=0.05, description="descent allowed past nominal touch")
+    guard_speed_m_s: float = Field(0.025, gt=0, le=0.2)
+    touch_force_drop_n: float = Field(0.6, gt=0, le=50, description="wrist force drop that means touch-down")
+    retreat_m: float = Field(0.05, gt=0, le=0.3, description="back out along the approach after release")
+    retract_up_m: float = Field(0.10, ge=0, le=0.5)
+    retract_clear_m: float = Field(
+        0.06,
+        ge=0,
+        le=0.3,
+        description="tool tip at least this far above the standing rod's top after the retract (the palm hangs "
+        "below the tip)",
+    )
+    max_axis_tilt_deg: float = Field(20.0, ge=0, le=60, description="a lying rod's axis this far from level")
+    max_height_error_m: float = Field(0.03, ge=0, le=0.2, description="rod centre vs table + radius")
+    heading_step_deg: float = Field(30.0, ge=5, le=180, description="tool headings tried after the turn")
+    turn_step_deg: float = Field(
+        4.0, gt=0, le=10, description="orientation step of the turn checks (motion executes it densely)"
+    )
+
+    @model_validator(mode="after")
+    def _guard_starts_above(self) -> RodStandSettings:
+        if self.place_approach_m <= self.offset_tolerance_m:
+            raise ValueError(
+                f"rod place_approach_m {self.place_approach_m} must exceed offset_tolerance_m "
+                f"{self.offset_tolerance_m}: a rod grasped off-centre would touch down before the guard starts"
+            )
+        return self
+
+
+class CubeSortSettings(Model):
+    """Seed 004: cubes go to colour-keyed drop zones (base frame, table top at z = 0)."""
+
+    drop_zones_m: dict[str, Vec2] = Field(
+        default_factory=lambda: {
+            "red": (0.30, 0.45),
+            "blue": (0.45, 0.45),
+            "green": (0.30, -0.45),
+            "black": (0.45, -0.45),
+        }
+    )
+    transport_height_m: float = Field(
+        0.25, gt=0, le=1.0, description="tool tip while carrying (over obstacles)"
+    )
+    place_clearance_m: float = Field(
+        0.005, ge=0, le=0.1, description="cube bottom above the table at release"
+    )
+    place_approach_m: float = Field(0.05, gt=0, le=0.3)
+    guard_overtravel_m: float = Field(0.005, ge=0, le=0.05)
+    guard_speed_m_s: float = Field(0.03, gt=0, le=0.2)
+    touch_force_drop_n: float = Field(0.4, gt=0, le=50)
+    retract_up_m: float = Field(0.10, ge=0, le=0.5)
+    max_approach_tilt_deg: float = Field(10.0, ge=0, le=90, description="cube grasps: near top-down only")
+
+
+class GraspSettings(Model):
+    """Grasp service: synthesis, quality, reachability and the task-level waypoint plans."""
+
+    gripper: GraspGripperSettings = GraspGripperSettings()
+    force_closure: ForceClosureSettings = ForceClosureSettings()
+    rod: RodStandSettings = RodStandSettings()
+    cubes: CubeSortSettings = CubeSortSettings()
+    num_candidates: int = Field(20, ge=1, le=500, description="LLD §4.2 num_candidates")
+    approach_distance_m: float = Field(0.10, gt=0, le=0.5, description="pre-grasp offset along the approach")
+    lift_m: float = Field(0.10, gt=0, le=0.5, description="lift after a (non-rod) grasp")
+    max_grasp_depth_m: float = Field(0.06, gt=0, le=0.3, description="TCP below the entry face")
+    table_z_m: float = 0.0
+    jump_threshold_deg: float = Field(10.0, gt=0, le=90, description="largest joint step on a dense path")
+    path_step_m: float = Field(
+        0.01, gt=0, le=0.05, description="sampling of straight tool lines in the IK checks"
+    )
+    min_singularity_deg: float = Field(3.0, ge=0, le=45, description="|sin q5|, |sin q3| kept above this")
+    arm_table_clearance_m: float = Field(
+        0.08, ge=0, le=0.5, description="elbow and wrist joints above the table"
+    )
+    safe_home_joints_deg: dict[str, Vec6] = Field(
+        default_factory=lambda: {
+            "nova5": (180.0, 0.0, 90.0, 0.0, -90.0, 0.0),
+            "ur5e": (180.0, -90.0, 90.0, -90.0, -90.0, 0.0),
+            "ur3": (180.0, -90.0, 60.0, -60.0, -90.0, 0.0),
+        },
+        description="SAFE_HOME per robot model: above the workspace, tool down",
+    )

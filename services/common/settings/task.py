@@ -1,0 +1,37 @@
+"""The task orchestrator."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field
+
+from services.common.settings.base import Model
+
+
+class TaskSettings(Model):
+    """The task orchestrator: which job, retries (LLD §15.2) and per-state deadlines."""
+
+    task: Literal["stand-rod", "sort-cubes"] = "stand-rod"
+    detect_retries: int = Field(4, ge=0, le=20)  # waits 0.5, 1, 2, 4 s (doubling)
+    detect_retry_delay_s: float = Field(0.5, ge=0, le=30)
+    grasp_alternatives: int = Field(
+        8,
+        ge=1,
+        le=48,
+        description="plans tried per cycle (rod: 7 grasp points along it, then the next wrist option)",
+    )
+    alarm_recoveries: int = Field(2, ge=0, le=10)
+    regrasps: int = Field(2, ge=0, le=10)
+    verify_grasp: bool = True
+    detect_deadline_s: float = Field(10.0, gt=0)
+    plan_deadline_s: float = Field(30.0, gt=0)
+    motion_deadline_s: float = Field(60.0, gt=0)
+    gripper_deadline_s: float = Field(10.0, gt=0)
+    status_rate_hz: float = Field(2.0, gt=0, le=50)
+    pause_between_cycles_s: float = Field(0.5, ge=0, le=60)
+    # Fractions of the joint speed/acceleration limits while carrying the object and on guarded moves.
+    holding_speed_scale: float = Field(0.4, gt=0, le=1)
+    guarded_speed_scale: float = Field(0.1, gt=0, le=1)
+    # A fresh twin scene after each cycle in `pickplace up` (the simulated operator lays the rod down again).
+    reset_scene_each_cycle: bool = True
