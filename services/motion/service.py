@@ -28,7 +28,7 @@ from services.kinematics.model import ArmModel, Kinematics, load_arm
 from services.kinematics.robot_models import ROBOTS
 from services.kinematics.trajectory import Array, JointTrajectory
 from services.kinematics.urdf import tool_geometry
-from services.motion.planner import MotionPlanner, Plan, PlannerConfig, Waypoint
+from services.motion.planner import MotionPlanner, Plan, PlannerConfig
 
 log = logging.getLogger("pickplace.motion.service")
 
@@ -41,6 +41,9 @@ PLANNING_SECONDS = Histogram(
 )
 
 T = TypeVar("T")
+
+# a joint waypoint this close to where the arm already is (every joint) plans no motion
+ALREADY_THERE_RAD = 1e-9
 
 
 # --- proto ↔ core ---------------------------------------------------------------------------------
@@ -208,23 +211,49 @@ class MotionPlannerServicer(motion_pb2_grpc.MotionPlannerServicer):
         self, request: motion_pb2.PlanWaypointsRequest, context: grpc.aio.ServicerContext
     ) -> motion_pb2.PlanResponse:
         def work() -> motion_pb2.PlanResponse:
-            planner = self._planner(request.scene, request.options)
-            waypoints = []
+            if not request.waypoints:
+                raise InvalidInputError("a waypoint plan needs at least one waypoint")
+            start = q = _joints(request.start, "start")
+            names: tuple[str, ...] = ()
+            pieces: list[JointTrajectory] = []
+            paths, used, notes = [q[None]], [], []
+            planning_s = timing_s = 0.0
             for k, w in enumerate(request.waypoints):
-                motion = "linear" if w.motion == motion_pb2.MotionWaypoint.LINEAR else "joint"
-                if len(w.joints):
-                    waypoints.append(
-                        Waypoint(joints=_joints(w.joints, f"waypoints[{k}].joints"), motion=motion)
-                    )
-                elif w.HasField("pose"):
-                    waypoints.append(
-                        Waypoint(pose=pose_to_matrix(w.pose, f"waypoints[{k}].pose"), motion=motion)
-                    )
-                else:
+                # each waypoint exactly as its own PlanJoints / PlanCartesian request would plan it
+                planner = self._planner(
+                    w.scene if w.HasField("scene") else request.scene,
+                    w.options if w.HasField("options") else request.options,
+                )
+                names = planner.names
+                what = f"waypoints[{k}]"
+                goal = _joints(w.joints, f"{what}.joints") if len(w.joints) else None
+                if goal is None and not w.HasField("pose"):
                     raise InvalidInputError(
                         f"waypoint {k} ({w.label or 'unlabelled'}) has neither pose nor joints"
                     )
-            return plan_response(planner.plan_waypoints(_joints(request.start, "start"), waypoints))
+                if w.motion == motion_pb2.MotionWaypoint.LINEAR:
+                    T_goal = pose_to_matrix(w.pose, f"{what}.pose") if goal is None else planner.kin.fk(goal)
+                    plan = planner.plan_cartesian(q, [T_goal])
+                elif goal is None:
+                    plan = planner.plan_to_pose(q, pose_to_matrix(w.pose, f"{what}.pose"))
+                elif float(np.max(np.abs(goal - q))) < ALREADY_THERE_RAD:
+                    pieces.append(JointTrajectory.hold(names, q))  # nothing to move
+                    continue
+                else:
+                    plan = planner.plan_joints(q, goal)
+                pieces.append(plan.trajectory)
+                paths.append(plan.path[1:])
+                used.append(plan.planner)
+                notes += plan.notes
+                planning_s += plan.planning_time_s
+                timing_s += plan.timing_time_s
+                q = plan.trajectory.positions[-1]
+            whole = JointTrajectory.hold(names, start)
+            for piece in pieces:
+                whole = whole.append(piece) if len(piece) > 1 else whole
+            resp = plan_response(Plan(whole, np.vstack(paths), "+".join(used), planning_s, timing_s, notes))
+            resp.segments.extend(piece.to_proto() for piece in pieces)  # type: ignore[misc]
+            return resp
 
         return await self._run("PlanWaypoints", work)
 

@@ -153,7 +153,7 @@ class PlanCartesianRequest(_message.Message):
     def __init__(self, start: _Optional[_Iterable[float]] = ..., poses: _Optional[_Iterable[_Union[_common_pb2.Pose, _Mapping]]] = ..., scene: _Optional[_Union[PlanningScene, _Mapping]] = ..., options: _Optional[_Union[MotionOptions, _Mapping]] = ...) -> None: ...
 
 class MotionWaypoint(_message.Message):
-    __slots__ = ("motion", "pose", "joints", "label")
+    __slots__ = ("motion", "pose", "joints", "label", "scene", "options")
     class MotionType(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
         __slots__ = ()
         MOTION_TYPE_UNSPECIFIED: _ClassVar[MotionWaypoint.MotionType]
@@ -166,11 +166,15 @@ class MotionWaypoint(_message.Message):
     POSE_FIELD_NUMBER: _ClassVar[int]
     JOINTS_FIELD_NUMBER: _ClassVar[int]
     LABEL_FIELD_NUMBER: _ClassVar[int]
+    SCENE_FIELD_NUMBER: _ClassVar[int]
+    OPTIONS_FIELD_NUMBER: _ClassVar[int]
     motion: MotionWaypoint.MotionType
     pose: _common_pb2.Pose
     joints: _containers.RepeatedScalarFieldContainer[float]
     label: str
-    def __init__(self, motion: _Optional[_Union[MotionWaypoint.MotionType, str]] = ..., pose: _Optional[_Union[_common_pb2.Pose, _Mapping]] = ..., joints: _Optional[_Iterable[float]] = ..., label: _Optional[str] = ...) -> None: ...
+    scene: PlanningScene
+    options: MotionOptions
+    def __init__(self, motion: _Optional[_Union[MotionWaypoint.MotionType, str]] = ..., pose: _Optional[_Union[_common_pb2.Pose, _Mapping]] = ..., joints: _Optional[_Iterable[float]] = ..., label: _Optional[str] = ..., scene: _Optional[_Union[PlanningScene, _Mapping]] = ..., options: _Optional[_Union[MotionOptions, _Mapping]] = ...) -> None: ...
 
 class PlanWaypointsRequest(_message.Message):
     __slots__ = ("start", "waypoints", "scene", "options")
@@ -185,7 +189,7 @@ class PlanWaypointsRequest(_message.Message):
     def __init__(self, start: _Optional[_Iterable[float]] = ..., waypoints: _Optional[_Iterable[_Union[MotionWaypoint, _Mapping]]] = ..., scene: _Optional[_Union[PlanningScene, _Mapping]] = ..., options: _Optional[_Union[MotionOptions, _Mapping]] = ...) -> None: ...
 
 class PlanResponse(_message.Message):
-    __slots__ = ("trajectory", "planner", "planning_time_s", "timing_time_s", "duration_s", "path_points", "notes", "velocity_ratio", "acceleration_ratio", "jerk_ratio")
+    __slots__ = ("trajectory", "planner", "planning_time_s", "timing_time_s", "duration_s", "path_points", "notes", "velocity_ratio", "acceleration_ratio", "jerk_ratio", "segments")
     TRAJECTORY_FIELD_NUMBER: _ClassVar[int]
     PLANNER_FIELD_NUMBER: _ClassVar[int]
     PLANNING_TIME_S_FIELD_NUMBER: _ClassVar[int]
@@ -196,6 +200,7 @@ class PlanResponse(_message.Message):
     VELOCITY_RATIO_FIELD_NUMBER: _ClassVar[int]
     ACCELERATION_RATIO_FIELD_NUMBER: _ClassVar[int]
     JERK_RATIO_FIELD_NUMBER: _ClassVar[int]
+    SEGMENTS_FIELD_NUMBER: _ClassVar[int]
     trajectory: _common_pb2.JointTrajectory
     planner: str
     planning_time_s: float
@@ -206,7 +211,8 @@ class PlanResponse(_message.Message):
     velocity_ratio: float
     acceleration_ratio: float
     jerk_ratio: float
-    def __init__(self, trajectory: _Optional[_Union[_common_pb2.JointTrajectory, _Mapping]] = ..., planner: _Optional[str] = ..., planning_time_s: _Optional[float] = ..., timing_time_s: _Optional[float] = ..., duration_s: _Optional[float] = ..., path_points: _Optional[int] = ..., notes: _Optional[_Iterable[str]] = ..., velocity_ratio: _Optional[float] = ..., acceleration_ratio: _Optional[float] = ..., jerk_ratio: _Optional[float] = ...) -> None: ...
+    segments: _containers.RepeatedCompositeFieldContainer[_common_pb2.JointTrajectory]
+    def __init__(self, trajectory: _Optional[_Union[_common_pb2.JointTrajectory, _Mapping]] = ..., planner: _Optional[str] = ..., planning_time_s: _Optional[float] = ..., timing_time_s: _Optional[float] = ..., duration_s: _Optional[float] = ..., path_points: _Optional[int] = ..., notes: _Optional[_Iterable[str]] = ..., velocity_ratio: _Optional[float] = ..., acceleration_ratio: _Optional[float] = ..., jerk_ratio: _Optional[float] = ..., segments: _Optional[_Iterable[_Union[_common_pb2.JointTrajectory, _Mapping]]] = ...) -> None: ...
 
 class CheckTrajectoryRequest(_message.Message):
     __slots__ = ("trajectory", "scene", "options", "skip_collisions")

@@ -86,7 +86,9 @@ class MotionPlannerServicer:
         raise NotImplementedError('Method not implemented!')
 
     def PlanWaypoints(self, request, context):
-        """A sequence of joint-space and linear moves, at rest at every waypoint.
+        """A sequence of joint-space and linear moves, at rest at every waypoint; each waypoint is planned
+        as its own PlanJoints / PlanCartesian would be (its own scene and options when it has them),
+        from where the previous one ends, and comes back as its own segment too.
         """
         context.set_code(grpc.StatusCode.UNIMPLEMENTED)
         context.set_details('Method not implemented!')
