@@ -1,5 +1,5 @@
 """Asyncio client for a Dobot V4 controller (real or simulated): the I/O around
-:mod:`services.dobot.protocol`.
+:mod:`services.dobot`.
 
 - Dashboard (29999): requests may be in flight together; replies are matched to
   requests by their echo, so a late reply after a timeout never shifts the
@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from services import dobot
 from services.common.errors import (
     ControllerError,
     EmergencyStopError,
@@ -38,8 +39,7 @@ from services.common.errors import (
 )
 from services.common.frames import dobot_pose_to_transform, finite_vector, transform_to_dobot_pose
 from services.common.settings import ReconnectSettings
-from services.dobot import protocol as P
-from services.dobot.protocol import RobotMode
+from services.dobot import RobotMode
 
 log = logging.getLogger("pickplace.robot.client")
 
@@ -102,7 +102,7 @@ class FeedbackState:
 @dataclass
 class _Pending:
     command: str
-    future: asyncio.Future[P.Reply]
+    future: asyncio.Future[dobot.Reply]
 
 
 def _backoff(attempt: int, rs: ReconnectSettings) -> float:
@@ -233,7 +233,7 @@ class DobotClient:
             self.state = ClientState.DISCONNECTED
 
     async def _dashboard_loop(self, reader: asyncio.StreamReader) -> None:
-        parser = P.ReplyParser()
+        parser = dobot.ReplyParser()
         reason = "connection closed by the controller"
         try:
             while True:
@@ -250,8 +250,8 @@ class DobotClient:
             log.warning("Dobot dashboard %s:%d lost: %s", self.host, self.dashboard_port, reason)
             self._drop_dashboard(RobotCommunicationError(f"dashboard connection lost ({reason})"))
 
-    def _dispatch_reply(self, item: P.Reply | P.Unparseable) -> None:
-        if isinstance(item, P.Unparseable):
+    def _dispatch_reply(self, item: dobot.Reply | dobot.Unparseable) -> None:
+        if isinstance(item, dobot.Unparseable):
             log.warning("unparseable reply from controller (%s): %r", item.reason, item.text)
             if self._pending:
                 p = self._pending.pop(0)
@@ -291,7 +291,7 @@ class DobotClient:
                 self._fb_event = asyncio.Event()
                 return
             attempt = 0
-            framer = P.FeedbackFramer()
+            framer = dobot.FeedbackFramer()
             try:
                 while True:
                     async with asyncio.timeout(max(self.feedback_timeout_s, 0.05) * 5):
@@ -371,11 +371,11 @@ class DobotClient:
         return fb
 
     # ------------------------------------------------------------------ requests
-    async def raw_request(self, command: str, timeout_s: float | None = None) -> P.Reply:
+    async def raw_request(self, command: str, timeout_s: float | None = None) -> dobot.Reply:
         """Send one command; return its reply whatever the ErrorID."""
         await self._ensure_dashboard()
         assert self._writer is not None
-        fut: asyncio.Future[P.Reply] = asyncio.get_running_loop().create_future()
+        fut: asyncio.Future[dobot.Reply] = asyncio.get_running_loop().create_future()
         pending = _Pending(command, fut)
         self._pending.append(pending)
         try:
@@ -394,21 +394,21 @@ class DobotClient:
             with contextlib.suppress(ValueError):
                 self._pending.remove(pending)
 
-    async def request(self, command: str, timeout_s: float | None = None) -> P.Reply:
+    async def request(self, command: str, timeout_s: float | None = None) -> dobot.Reply:
         """Send one command; raise ControllerError (or EmergencyStopError) unless ErrorID is 0."""
         reply = await self.raw_request(command, timeout_s)
-        if reply.error_id == P.ErrorID.ESTOP:
-            raise EmergencyStopError(f"{command} refused: {P.describe_error_id(reply.error_id)}")
+        if reply.error_id == dobot.ErrorID.ESTOP:
+            raise EmergencyStopError(f"{command} refused: {dobot.describe_error_id(reply.error_id)}")
         if reply.error_id != 0:
             raise ControllerError(
-                f"{command} refused with ErrorID {reply.error_id}: {P.describe_error_id(reply.error_id)}",
+                f"{command} refused with ErrorID {reply.error_id}: {dobot.describe_error_id(reply.error_id)}",
                 error_id=reply.error_id,
             )
         return reply
 
     # ------------------------------------------------------------------ commands (SI)
     async def enable(self, load_kg: float = 0.0) -> None:
-        await self.request(P.enable_robot(load_kg))
+        await self.request(dobot.enable_robot(load_kg))
 
     async def disable(self) -> None:
         await self.request("DisableRobot()")
@@ -421,7 +421,7 @@ class DobotClient:
 
     async def error_ids(self) -> list[int]:
         reply = await self.request("GetErrorID()")
-        return P.parse_error_ids(reply.values_text)
+        return dobot.parse_error_ids(reply.values_text)
 
     async def current_command_id(self) -> int:
         return int((await self.request("GetCurrentCommandID()")).floats()[0])
@@ -433,11 +433,11 @@ class DobotClient:
         return dobot_pose_to_transform((await self.request("GetPose()")).floats())
 
     async def speed_factor(self, ratio: int) -> None:
-        await self.request(P.speed_factor(ratio))
+        await self.request(dobot.speed_factor(ratio))
 
     async def acceleration_ratio(self, ratio: int) -> None:
         """AccJ and AccL at once: the acceleration percentage of MovJ / MovL without their own ``a=``."""
-        for cmd in P.acceleration_ratios(ratio):
+        for cmd in dobot.acceleration_ratios(ratio):
             await self.request(cmd)
 
     async def stop(self) -> None:
@@ -445,7 +445,7 @@ class DobotClient:
 
     async def emergency_stop(self, press: bool = True) -> None:
         # e-stop must never be refused by our own checks: raw send, then inspect
-        reply = await self.raw_request(P.emergency_stop(press))
+        reply = await self.raw_request(dobot.emergency_stop(press))
         if reply.error_id != 0:
             raise ControllerError(
                 f"EmergencyStop refused with ErrorID {reply.error_id}", error_id=reply.error_id
@@ -453,68 +453,68 @@ class DobotClient:
 
     async def positive_kin(self, q: Sequence[float]) -> np.ndarray:
         q = finite_vector(q, 6, "joints")
-        return dobot_pose_to_transform((await self.request(P.positive_kin(np.rad2deg(q)))).floats())
+        return dobot_pose_to_transform((await self.request(dobot.positive_kin(np.rad2deg(q)))).floats())
 
     async def inverse_kin(self, T: np.ndarray, joint_near: Sequence[float] | None = None) -> np.ndarray:
         near = None if joint_near is None else np.rad2deg(finite_vector(joint_near, 6, "joint_near"))
-        reply = await self.request(P.inverse_kin(transform_to_dobot_pose(T), near))
+        reply = await self.request(dobot.inverse_kin(transform_to_dobot_pose(T), near))
         return np.deg2rad(reply.floats())
 
     async def digital_output(
         self, index: int, on: bool, tool: bool = False, queued: bool = True
     ) -> int | None:
         if queued:
-            return (await self.request(P.digital_output(index, on, tool))).result_id
+            return (await self.request(dobot.digital_output(index, on, tool))).result_id
         name = "ToolDOInstant" if tool else "DOInstant"
-        await self.request(P.command(name, P.fmt_int(index), "1" if on else "0"))
+        await self.request(dobot.command(name, dobot.fmt_int(index), "1" if on else "0"))
         return None
 
     async def digital_input(self, index: int, tool: bool = False) -> bool:
-        reply = await self.request(P.command("ToolDI" if tool else "DI", P.fmt_int(index)))
+        reply = await self.request(dobot.command("ToolDI" if tool else "DI", dobot.fmt_int(index)))
         return bool(int(reply.floats()[0]))
 
     async def mov_j(
         self, q: Sequence[float], a: int | None = None, v: int | None = None, cp: int | None = None
     ) -> int | None:
         q = finite_vector(q, 6, "joint target")
-        return (await self.request(P.mov_j_joint(np.rad2deg(q), a, v, cp))).result_id
+        return (await self.request(dobot.mov_j_joint(np.rad2deg(q), a, v, cp))).result_id
 
     async def mov_j_pose(self, T: np.ndarray, a: int | None = None, v: int | None = None) -> int | None:
-        return (await self.request(P.mov_j_pose(transform_to_dobot_pose(T), a, v))).result_id
+        return (await self.request(dobot.mov_j_pose(transform_to_dobot_pose(T), a, v))).result_id
 
     async def mov_l(self, q: Sequence[float], a: int | None = None, v: int | None = None) -> int | None:
         q = finite_vector(q, 6, "joint target")
-        return (await self.request(P.mov_l_joint(np.rad2deg(q), a, v))).result_id
+        return (await self.request(dobot.mov_l_joint(np.rad2deg(q), a, v))).result_id
 
     async def mov_l_pose(
         self, T: np.ndarray, a: int | None = None, v: int | None = None, speed_m_s: float | None = None
     ) -> int | None:
         speed = None if speed_m_s is None else max(1, round(speed_m_s * 1000))
-        return (await self.request(P.mov_l_pose(transform_to_dobot_pose(T), a, v, speed))).result_id
+        return (await self.request(dobot.mov_l_pose(transform_to_dobot_pose(T), a, v, speed))).result_id
 
     async def servo_j(self, q: Sequence[float], t_s: float) -> int | None:
         q = finite_vector(q, 6, "servo target")
-        return (await self.request(P.servo_j(np.rad2deg(q), t_s))).result_id
+        return (await self.request(dobot.servo_j(np.rad2deg(q), t_s))).result_id
 
     async def rel_mov_l_tool(
         self, offset_m_rad: Sequence[float], a: int | None = None, v: int | None = None
     ) -> int | None:
         o = finite_vector(offset_m_rad, 6, "offset")
         mm_deg = np.concatenate([o[:3] * 1000.0, np.rad2deg(o[3:])])
-        return (await self.request(P.rel_mov_l_tool(mm_deg, a, v))).result_id
+        return (await self.request(dobot.rel_mov_l_tool(mm_deg, a, v))).result_id
 
     async def rel_mov_j_tool(
         self, offset_m_rad: Sequence[float], a: int | None = None, v: int | None = None
     ) -> int | None:
         o = finite_vector(offset_m_rad, 6, "offset")
         mm_deg = np.concatenate([o[:3] * 1000.0, np.rad2deg(o[3:])])
-        return (await self.request(P.rel_mov_j_tool(mm_deg, a, v))).result_id
+        return (await self.request(dobot.rel_mov_j_tool(mm_deg, a, v))).result_id
 
     async def rel_joint_mov_j(
         self, dq: Sequence[float], a: int | None = None, v: int | None = None
     ) -> int | None:
         d = finite_vector(dq, 6, "joint offsets")
-        return (await self.request(P.rel_joint_mov_j(np.rad2deg(d), a, v))).result_id
+        return (await self.request(dobot.rel_joint_mov_j(np.rad2deg(d), a, v))).result_id
 
     # ------------------------------------------------------------------ completion
     async def describe_alarms(self) -> tuple[list[int], str]:
@@ -522,7 +522,7 @@ class DobotClient:
             ids = await self.error_ids()
         except Exception as exc:  # the alarm itself matters more than why we couldn't read it
             return [], f"(GetErrorID failed: {exc})"
-        return ids, ", ".join(f"{i}: {P.describe_alarm(i)}" for i in ids) or "no alarm IDs reported"
+        return ids, ", ".join(f"{i}: {dobot.describe_alarm(i)}" for i in ids) or "no alarm IDs reported"
 
     async def wait_motion_done(self, result_id: int | None, timeout_s: float) -> FeedbackState:
         """Wait until the queue command ``result_id`` finished and the arm is idle.

@@ -28,7 +28,7 @@ from services.common.errors import (
     TrajectoryExecutionError,
 )
 from services.common.settings import Settings
-from services.dobot.protocol import RobotMode
+from services.dobot import RobotMode
 from services.kinematics import analytic
 from services.kinematics.robot_models import RobotSpec
 from services.kinematics.trajectory import JointTrajectory

@@ -7,7 +7,7 @@ import time
 from pickplace.v1 import common_pb2, robot_pb2
 
 from services.common.messages import matrix_to_pose
-from services.dobot.protocol import RobotMode
+from services.dobot import RobotMode
 from services.kinematics.robot_models import RobotSpec
 from services.robot.client import FeedbackState
 

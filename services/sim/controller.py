@@ -18,6 +18,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from services import dobot
 from services.common.errors import IKFailureError
 from services.common.frames import (
     dobot_pose_to_transform,
@@ -25,8 +26,7 @@ from services.common.frames import (
     rpy_deg_to_matrix,
     transform_to_dobot_pose,
 )
-from services.dobot import protocol as P
-from services.dobot.protocol import RobotMode
+from services.dobot import RobotMode
 from services.kinematics import analytic
 from services.kinematics.cartesian import straight_line_joint_path
 from services.kinematics.robot_models import RobotSpec
@@ -40,7 +40,7 @@ MAX_TCP_SPEED_MM_S = 1000.0
 MAX_TCP_ACC_MM_S2 = 4000.0
 
 
-Handler = Callable[["SimController", P.ParsedCommand], object]
+Handler = Callable[["SimController", dobot.ParsedCommand], object]
 
 
 class CommandError(Exception):
@@ -123,7 +123,7 @@ class SimController:
         self.measured = EngineState(q=q.copy(), qd=np.zeros(spec.dof))
         self.boot_ms = clock_ms()
         self.commands_handled = 0
-        self._feedback = P.new_feedback()
+        self._feedback = dobot.new_feedback()
         self._refresh_feedback()
 
     # ------------------------------------------------------------------ state
@@ -144,7 +144,7 @@ class SimController:
     def raise_alarm(self, alarm_id: int, why: str) -> None:
         if alarm_id not in self.alarms:
             self.alarms.append(alarm_id)
-        log.warning("alarm %d (%s): %s", alarm_id, P.describe_alarm(alarm_id), why)
+        log.warning("alarm %d (%s): %s", alarm_id, dobot.describe_alarm(alarm_id), why)
         self._halt()
 
     def _halt(self) -> None:
@@ -207,7 +207,7 @@ class SimController:
     def _check_measured(self) -> None:
         if self.measured.collision and 117 not in self.alarms:
             self.collision_state = True
-            self.raise_alarm(int(P.Alarm.COLLISION), self.measured.collision)
+            self.raise_alarm(int(dobot.Alarm.COLLISION), self.measured.collision)
         hit = self._limit_violation(self.measured.q, 1e-3)
         if hit is not None and hit[0] not in self.alarms:
             self.raise_alarm(*hit)
@@ -220,7 +220,7 @@ class SimController:
                 (False, q[j] < self.spec.lower[j] - tol),
             ):
                 if beyond:
-                    return P.joint_limit_alarm(j, positive), f"joint {j + 1} at {np.rad2deg(q[j]):.2f}°"
+                    return dobot.joint_limit_alarm(j, positive), f"joint {j + 1} at {np.rad2deg(q[j]):.2f}°"
         return None
 
     # ------------------------------------------------------------------ feedback
@@ -261,7 +261,7 @@ class SimController:
         rec["SafetyState"] = 0xFE if self.estop else 0xFF
 
     def feedback_bytes(self) -> bytes:
-        return P.encode_feedback(self._feedback)
+        return dobot.encode_feedback(self._feedback)
 
     # ------------------------------------------------------------------ commands
     def handle(self, text: str) -> str:
@@ -269,36 +269,36 @@ class SimController:
         self.commands_handled += 1
         echo = text.strip()
         try:
-            cmd = P.parse_command(echo)
-        except P.ProtocolError:
+            cmd = dobot.parse_command(echo)
+        except dobot.ProtocolError:
             name = echo.split("(", 1)[0].strip()
             if "(" in echo and name.lower() in self._handlers:
-                return P.format_reply(P.ErrorID.PARAM_COUNT, "", echo)
-            return P.format_reply(P.ErrorID.UNKNOWN_COMMAND, "", echo)
+                return dobot.format_reply(dobot.ErrorID.PARAM_COUNT, "", echo)
+            return dobot.format_reply(dobot.ErrorID.UNKNOWN_COMMAND, "", echo)
         handler = self._handlers.get(cmd.key)
         if handler is None:
-            return P.format_reply(P.ErrorID.UNKNOWN_COMMAND, "", echo)
+            return dobot.format_reply(dobot.ErrorID.UNKNOWN_COMMAND, "", echo)
         try:
             self._gate(cmd.key)
             values = handler(self, cmd)
         except CommandError as exc:
-            return P.format_reply(exc.error_id, "", echo)
-        return P.format_reply(0, values, echo)
+            return dobot.format_reply(exc.error_id, "", echo)
+        return dobot.format_reply(0, values, echo)
 
     def _gate(self, key: str) -> None:
-        if key in P.ALLOWED_IN_ERROR:
+        if key in dobot.ALLOWED_IN_ERROR:
             return
         if self.estop:
-            raise CommandError(P.ErrorID.ESTOP)
+            raise CommandError(dobot.ErrorID.ESTOP)
         if self.alarms:
-            raise CommandError(P.ErrorID.ALARM)
+            raise CommandError(dobot.ErrorID.ALARM)
 
     # --- argument helpers
     @staticmethod
-    def _nargs(cmd: P.ParsedCommand, lo: int, hi: int | None = None) -> None:
+    def _nargs(cmd: dobot.ParsedCommand, lo: int, hi: int | None = None) -> None:
         hi = lo if hi is None else hi
         if not lo <= len(cmd.args) <= hi:
-            raise CommandError(P.ErrorID.PARAM_COUNT)
+            raise CommandError(dobot.ErrorID.PARAM_COUNT)
 
     @staticmethod
     def _float(text: str, pos: int, optional: bool = False) -> float:
@@ -318,14 +318,14 @@ class SimController:
             raise CommandError((-60000 if optional else -40000) - pos)
         return int(v)
 
-    def _opt_ratio(self, cmd: P.ParsedCommand, key: str, default: int, lo: int = 1) -> int:
+    def _opt_ratio(self, cmd: dobot.ParsedCommand, key: str, default: int, lo: int = 1) -> int:
         if key not in cmd.kwargs:
             return default
         return self._int(cmd.kwargs[key], 1, lo, 100, optional=True)
 
     def _point(self, text: str, pos: int) -> np.ndarray:
         try:
-            pts = P.parse_point(text, 6)
+            pts = dobot.parse_point(text, 6)
         except ValueError:
             raise CommandError(-30000 - pos) from None
         arr = np.array(pts)
@@ -333,22 +333,22 @@ class SimController:
             raise CommandError(-40000 - pos)
         return arr
 
-    def _joint_or_pose(self, cmd: P.ParsedCommand) -> tuple[str, np.ndarray]:
+    def _joint_or_pose(self, cmd: dobot.ParsedCommand) -> tuple[str, np.ndarray]:
         """MovJ/MovL target: ``joint={..}`` or ``pose={..}`` (or six positional pose values)."""
         if "joint" in cmd.kwargs:
             if cmd.args:
-                raise CommandError(P.ErrorID.PARAM_COUNT)
+                raise CommandError(dobot.ErrorID.PARAM_COUNT)
             q_deg = self._point(cmd.kwargs["joint"], 1)
             if np.any(np.abs(q_deg) > PARAM_LIMIT_DEG):
                 raise CommandError(-40001)
             return "joint", q_deg
         if "pose" in cmd.kwargs:
             if cmd.args:
-                raise CommandError(P.ErrorID.PARAM_COUNT)
+                raise CommandError(dobot.ErrorID.PARAM_COUNT)
             return "pose", self._point(cmd.kwargs["pose"], 1)
         if len(cmd.args) == 6:
             return "pose", np.array([self._float(a, i + 1) for i, a in enumerate(cmd.args)])
-        raise CommandError(P.ErrorID.PARAM_COUNT)
+        raise CommandError(dobot.ErrorID.PARAM_COUNT)
 
     def _joint_limits_deg(self) -> tuple[np.ndarray, np.ndarray]:
         return np.rad2deg(self.spec.lower), np.rad2deg(self.spec.upper)
@@ -364,7 +364,7 @@ class SimController:
 
     def _enqueue(self, key: str, run: Callable[[], Profile | None], text: str) -> list[int]:
         if not self.enabled:
-            raise CommandError(P.ErrorID.FAILED)
+            raise CommandError(dobot.ErrorID.FAILED)
         cid = self.next_id
         self.next_id += 1
         self.queue.append(QueuedCommand(cid, key, run, text))
@@ -378,19 +378,19 @@ class SimController:
         hit = self._limit_violation(q, 1e-9)
         if hit is not None:
             self.raise_alarm(hit[0], "target " + hit[1])
-            raise CommandError(P.ErrorID.ALARM)
+            raise CommandError(dobot.ErrorID.ALARM)
 
     def _ik_or_alarm(self, T: np.ndarray, seed: np.ndarray) -> np.ndarray:
         sols = analytic.solutions_within_limits(self.spec, T, seed)
         if sols.shape[0] == 0:
             _, valid = analytic.ik_all(self.spec, T)
-            alarm = P.Alarm.IK_OUT_OF_WORKSPACE if valid.any() else P.Alarm.IK_NO_SOLUTION
+            alarm = dobot.Alarm.IK_OUT_OF_WORKSPACE if valid.any() else dobot.Alarm.IK_NO_SOLUTION
             self.raise_alarm(int(alarm), f"pose {np.round(transform_to_dobot_pose(T), 3).tolist()}")
-            raise CommandError(P.ErrorID.ALARM)
+            raise CommandError(dobot.ErrorID.ALARM)
         q = sols[0]
         if analytic.manipulability(self.spec, q) < 1e-4:
-            self.raise_alarm(int(P.Alarm.WRIST_SINGULARITY), "target is at a singularity")
-            raise CommandError(P.ErrorID.ALARM)
+            self.raise_alarm(int(dobot.Alarm.WRIST_SINGULARITY), "target is at a singularity")
+            raise CommandError(dobot.ErrorID.ALARM)
         return q
 
     def _movj_to(self, q_goal: np.ndarray, a: int, v: int) -> Profile:
@@ -410,12 +410,12 @@ class SimController:
             path = straight_line_joint_path(self.spec, T_start, T_goal, self.q_ref)
         except IKFailureError as exc:
             msg = str(exc)
-            alarm = P.Alarm.WRIST_SINGULARITY if "jump" in msg else P.Alarm.IK_NO_SOLUTION
+            alarm = dobot.Alarm.WRIST_SINGULARITY if "jump" in msg else dobot.Alarm.IK_NO_SOLUTION
             self.raise_alarm(int(alarm), f"MovL: {msg}")
-            raise CommandError(P.ErrorID.ALARM) from None
+            raise CommandError(dobot.ErrorID.ALARM) from None
         if q_goal_hint is not None and np.max(np.abs(path[-1] - q_goal_hint)) > 1e-3:
-            self.raise_alarm(int(P.Alarm.IK_NO_SOLUTION), "MovL cannot reach the joint target on a line")
-            raise CommandError(P.ErrorID.ALARM)
+            self.raise_alarm(int(dobot.Alarm.IK_NO_SOLUTION), "MovL cannot reach the joint target on a line")
+            raise CommandError(dobot.ErrorID.ALARM)
         for q in path:
             self._check_target_limits(q)
         length_mm = np.linalg.norm(T_goal[:3, 3] - T_start[:3, 3]) * 1000.0
@@ -428,9 +428,9 @@ class SimController:
         return PathProfile(path, floor, self._vmax(v), self._amax(a))
 
     # --- handlers
-    def _h_enable(self, cmd: P.ParsedCommand) -> list[object]:
+    def _h_enable(self, cmd: dobot.ParsedCommand) -> list[object]:
         if len(cmd.args) not in (0, 1, 4, 5):
-            raise CommandError(P.ErrorID.PARAM_COUNT)
+            raise CommandError(dobot.ErrorID.PARAM_COUNT)
         if cmd.args:
             load = self._float(cmd.args[0], 1)
             if not 0 <= load <= 5:
@@ -439,89 +439,89 @@ class SimController:
         self.engine.hold()
         return []
 
-    def _h_disable(self, cmd: P.ParsedCommand) -> list[object]:
+    def _h_disable(self, cmd: dobot.ParsedCommand) -> list[object]:
         self._nargs(cmd, 0)
         self._halt()
         self.enabled = False
         return []
 
-    def _h_clear_error(self, cmd: P.ParsedCommand) -> list[object]:
+    def _h_clear_error(self, cmd: dobot.ParsedCommand) -> list[object]:
         self._nargs(cmd, 0)
         if self.estop:
-            raise CommandError(P.ErrorID.ESTOP)
+            raise CommandError(dobot.ErrorID.ESTOP)
         self.alarms.clear()
         self.collision_state = False
         self.q_ref = self.measured.q.copy()
         return []
 
-    def _h_robot_mode(self, cmd: P.ParsedCommand) -> list[object]:
+    def _h_robot_mode(self, cmd: dobot.ParsedCommand) -> list[object]:
         self._nargs(cmd, 0)
         return [int(self.mode)]
 
-    def _h_get_error_id(self, cmd: P.ParsedCommand) -> str:
+    def _h_get_error_id(self, cmd: dobot.ParsedCommand) -> str:
         self._nargs(cmd, 0)
         ids = ",".join(str(a) for a in self.alarms)
         if self.config.error_id_shape == "v45":
             return f"[[{ids}],[],[],[],[],[],[]]"
         return f"[{ids}]"
 
-    def _h_stop(self, cmd: P.ParsedCommand) -> list[object]:
+    def _h_stop(self, cmd: dobot.ParsedCommand) -> list[object]:
         self._nargs(cmd, 0)
         self._halt()
         self.paused = False
         return []
 
-    def _h_pause(self, cmd: P.ParsedCommand) -> list[object]:
+    def _h_pause(self, cmd: dobot.ParsedCommand) -> list[object]:
         self._nargs(cmd, 0)
         self.paused = True
         return []
 
-    def _h_continue(self, cmd: P.ParsedCommand) -> list[object]:
+    def _h_continue(self, cmd: dobot.ParsedCommand) -> list[object]:
         self._nargs(cmd, 0)
         self.paused = False
         return []
 
-    def _h_estop(self, cmd: P.ParsedCommand) -> list[object]:
+    def _h_estop(self, cmd: dobot.ParsedCommand) -> list[object]:
         self._nargs(cmd, 0, 1)
         press = True if not cmd.args else bool(self._int(cmd.args[0], 1, 0, 1))
         if press:
             self.estop = True
             self.enabled = False
-            self.raise_alarm(int(P.Alarm.ESTOP_PRESSED), "software emergency stop")
+            self.raise_alarm(int(dobot.Alarm.ESTOP_PRESSED), "software emergency stop")
         else:
             self.estop = False
         return []
 
-    def _h_speed_factor(self, cmd: P.ParsedCommand) -> list[object]:
+    def _h_speed_factor(self, cmd: dobot.ParsedCommand) -> list[object]:
         self._nargs(cmd, 1)
         self.ratios.speed_factor = self._int(cmd.args[0], 1, 1, 100)
         return []
 
     @staticmethod
     def _h_ratio(attr: str, lo: int = 1) -> Handler:
-        def h(self: SimController, cmd: P.ParsedCommand) -> list[object]:
+        def h(self: SimController, cmd: dobot.ParsedCommand) -> list[object]:
             self._nargs(cmd, 1)
             setattr(self.ratios, attr, self._int(cmd.args[0], 1, lo, 100))
             return []
 
         return h
 
-    def _h_get_angle(self, cmd: P.ParsedCommand) -> list[object]:
+    def _h_get_angle(self, cmd: dobot.ParsedCommand) -> list[object]:
         self._nargs(cmd, 0)
         return [float(x) for x in np.rad2deg(self.measured.q)]
 
-    def _h_get_pose(self, cmd: P.ParsedCommand) -> list[object]:
+    def _h_get_pose(self, cmd: dobot.ParsedCommand) -> list[object]:
         self._nargs(cmd, 0)
         if ("user" in cmd.kwargs) != ("tool" in cmd.kwargs):
             raise CommandError(-50001)
         return [float(x) for x in transform_to_dobot_pose(analytic.fk(self.spec, self.measured.q))]
 
-    def _h_positive_kin(self, cmd: P.ParsedCommand) -> list[object]:
+    def _h_positive_kin(self, cmd: dobot.ParsedCommand) -> list[object]:
         self._nargs(cmd, 6)
         q_deg = np.array([self._float(a, i + 1) for i, a in enumerate(cmd.args)])
         return [float(x) for x in transform_to_dobot_pose(analytic.fk(self.spec, np.deg2rad(q_deg)))]
 
-    def _h_inverse_kin(self, cmd: P.ParsedCommand) -> list[object]:
+    def _h_inverse_kin(self, cmd: dobot.ParsedCommand) -> list[object]:
         self._nargs(cmd, 6)
         pose = np.array([self._float(a, i + 1) for i, a in enumerate(cmd.args)])
         seed = self.measured.q
@@ -529,14 +529,14 @@ class SimController:
             seed = np.deg2rad(self._point(cmd.kwargs["jointnear"], 1))
         sols = analytic.solutions_within_limits(self.spec, dobot_pose_to_transform(pose), seed)
         if sols.shape[0] == 0:
-            raise CommandError(P.ErrorID.FAILED)
+            raise CommandError(dobot.ErrorID.FAILED)
         return [float(x) for x in np.rad2deg(sols[0])]
 
-    def _h_current_id(self, cmd: P.ParsedCommand) -> list[object]:
+    def _h_current_id(self, cmd: dobot.ParsedCommand) -> list[object]:
         self._nargs(cmd, 0)
         return [self.current_cmd_id]
 
-    def _h_movj(self, cmd: P.ParsedCommand) -> list[object]:
+    def _h_movj(self, cmd: dobot.ParsedCommand) -> list[object]:
         kind, target = self._joint_or_pose(cmd)
         a = self._opt_ratio(cmd, "a", self.ratios.acc_j)
         v = self._opt_ratio(cmd, "v", self.ratios.vel_j)
@@ -551,7 +551,7 @@ class SimController:
 
         return self._enqueue("movj", run, cmd.raw)
 
-    def _h_movl(self, cmd: P.ParsedCommand) -> list[object]:
+    def _h_movl(self, cmd: dobot.ParsedCommand) -> list[object]:
         kind, target = self._joint_or_pose(cmd)
         a = self._opt_ratio(cmd, "a", self.ratios.acc_l)
         v = self._opt_ratio(cmd, "v", self.ratios.vel_l)
@@ -568,7 +568,7 @@ class SimController:
 
         return self._enqueue("movl", run, cmd.raw)
 
-    def _h_servoj(self, cmd: P.ParsedCommand) -> list[object]:
+    def _h_servoj(self, cmd: dobot.ParsedCommand) -> list[object]:
         self._nargs(cmd, 6)
         q_deg = np.array([self._float(a, i + 1) for i, a in enumerate(cmd.args)])
         if np.any(np.abs(q_deg) > PARAM_LIMIT_DEG):
@@ -587,14 +587,15 @@ class SimController:
             if over.size:
                 j = int(over[0])
                 self.raise_alarm(
-                    P.joint_overspeed_alarm(j), f"ServoJ asks joint {j + 1} for {np.rad2deg(speed[j]):.1f}°/s"
+                    dobot.joint_overspeed_alarm(j),
+                    f"ServoJ asks joint {j + 1} for {np.rad2deg(speed[j]):.1f}°/s",
                 )
-                raise CommandError(P.ErrorID.ALARM)
+                raise CommandError(dobot.ErrorID.ALARM)
             return LinearInTime(self.q_ref, q_goal, t)
 
         return self._enqueue("servoj", run, cmd.raw)
 
-    def _h_rel_joint(self, cmd: P.ParsedCommand) -> list[object]:
+    def _h_rel_joint(self, cmd: dobot.ParsedCommand) -> list[object]:
         self._nargs(cmd, 6)
         d = np.deg2rad([self._float(x, i + 1) for i, x in enumerate(cmd.args)])
         a = self._opt_ratio(cmd, "a", self.ratios.acc_j)
@@ -603,7 +604,7 @@ class SimController:
 
     @staticmethod
     def _h_rel_cartesian(frame: str, linear: bool) -> Handler:
-        def h(self: SimController, cmd: P.ParsedCommand) -> list[object]:
+        def h(self: SimController, cmd: dobot.ParsedCommand) -> list[object]:
             self._nargs(cmd, 6)
             off = np.array([self._float(x, i + 1) for i, x in enumerate(cmd.args)])
             a = self._opt_ratio(cmd, "a", self.ratios.acc_l if linear else self.ratios.acc_j)
@@ -637,7 +638,7 @@ class SimController:
 
     @staticmethod
     def _h_do(tool: bool, instant: bool) -> Handler:
-        def h(self: SimController, cmd: P.ParsedCommand) -> list[object]:
+        def h(self: SimController, cmd: dobot.ParsedCommand) -> list[object]:
             self._nargs(cmd, 2, 3 if not instant and not tool else 2)
             index = self._int(cmd.args[0], 1, 1, 2 if tool else 64)
             on = bool(self._int(cmd.args[1], 2, 0, 1))
@@ -655,7 +656,7 @@ class SimController:
 
     @staticmethod
     def _h_get_do(tool: bool) -> Handler:
-        def h(self: SimController, cmd: P.ParsedCommand) -> list[object]:
+        def h(self: SimController, cmd: dobot.ParsedCommand) -> list[object]:
             self._nargs(cmd, 1)
             index = self._int(cmd.args[0], 1, 1, 2 if tool else 64)
             mask = self.tool_do_mask if tool else self.do_mask
@@ -663,14 +664,14 @@ class SimController:
 
         return h
 
-    def _h_di(self, cmd: P.ParsedCommand) -> list[object]:
+    def _h_di(self, cmd: dobot.ParsedCommand) -> list[object]:
         self._nargs(cmd, 1)
         index = self._int(cmd.args[0], 1, 1, 64)
         return [(self.measured.digital_inputs >> (index - 1)) & 1]
 
     @staticmethod
     def _h_noop(n: int) -> Handler:
-        def h(self: SimController, cmd: P.ParsedCommand) -> list[object]:
+        def h(self: SimController, cmd: dobot.ParsedCommand) -> list[object]:
             self._nargs(cmd, 0, n)
             return []
 
@@ -678,7 +679,7 @@ class SimController:
 
     @staticmethod
     def _h_queue_noop(lo: int, hi: int) -> Handler:
-        def h(self: SimController, cmd: P.ParsedCommand) -> list[object]:
+        def h(self: SimController, cmd: dobot.ParsedCommand) -> list[object]:
             self._nargs(cmd, lo, hi)
             return self._enqueue(cmd.key, lambda: None, cmd.raw)
 

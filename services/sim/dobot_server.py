@@ -14,7 +14,7 @@ import logging
 import threading
 import time
 
-from services.dobot.protocol import CommandFramer
+from services.dobot import CommandFramer
 from services.sim.controller import SimController
 
 log = logging.getLogger("pickplace.sim.server")

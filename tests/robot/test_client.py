@@ -9,7 +9,7 @@ import pytest
 
 from services.common.errors import ControllerError, EmergencyStopError, RobotCommunicationError
 from services.common.settings import ReconnectSettings
-from services.dobot.protocol import RobotMode
+from services.dobot import RobotMode
 from services.robot.client import ClientState, DobotClient
 from tests.conftest import HOME
 

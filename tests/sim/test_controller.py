@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
+from services import dobot
 from services.common.frames import dobot_pose_to_transform
-from services.dobot import protocol as P
 from services.kinematics import analytic
 from services.kinematics.robot_models import NOVA5
 from services.sim.controller import SimController
@@ -25,8 +25,8 @@ def run(c: SimController, seconds: float, dt: float = 0.008) -> None:
         c.tick(dt)
 
 
-def reply(c: SimController, cmd: str) -> P.Reply:
-    return P.parse_reply(c.handle(cmd))
+def reply(c: SimController, cmd: str) -> dobot.Reply:
+    return dobot.parse_reply(c.handle(cmd))
 
 
 def test_disabled_until_enabled():
@@ -42,9 +42,9 @@ def test_movj_runs_queue_ids_and_modes(ctrl):
     r2 = reply(ctrl, "MovJ(joint={0,0,90,0,-90,0},v=100,a=100)")
     assert (r1.result_id, r2.result_id) == (1, 2)
     ctrl.tick(0.008)
-    assert ctrl.mode == P.RobotMode.RUNNING and ctrl.current_cmd_id == 1
+    assert ctrl.mode == dobot.RobotMode.RUNNING and ctrl.current_cmd_id == 1
     run(ctrl, 10)
-    assert ctrl.mode == P.RobotMode.ENABLE and ctrl.current_cmd_id == 2
+    assert ctrl.mode == dobot.RobotMode.ENABLE and ctrl.current_cmd_id == 2
     assert np.allclose(reply(ctrl, "GetAngle()").floats(), [0, 0, 90, 0, -90, 0], atol=1e-6)
 
 
@@ -62,7 +62,7 @@ def test_movj_respects_speed_limits(ctrl):
 def test_feedback_consistent_with_fk(ctrl):
     reply(ctrl, "MovJ(joint={10,20,30,40,50,60})")
     run(ctrl, 5)
-    rec = P.decode_feedback(ctrl.feedback_bytes())
+    rec = dobot.decode_feedback(ctrl.feedback_bytes())
     q = np.deg2rad(rec["QActual"])
     T = dobot_pose_to_transform(rec["ToolVectorActual"])
     assert np.allclose(T, analytic.fk(NOVA5, q), atol=1e-9)
@@ -75,20 +75,20 @@ def test_feedback_consistent_with_fk(ctrl):
 def test_joint_limit_alarm_then_clear(ctrl):
     assert reply(ctrl, "MovJ(joint={0,0,170,0,0,0})").ok  # J3 limit is ±159.9°
     ctrl.tick(0.008)
-    assert ctrl.mode == P.RobotMode.ERROR
-    assert P.parse_error_ids(reply(ctrl, "GetErrorID()").values_text) == [68]
+    assert ctrl.mode == dobot.RobotMode.ERROR
+    assert dobot.parse_error_ids(reply(ctrl, "GetErrorID()").values_text) == [68]
     assert reply(ctrl, "GetAngle()").error_id == -2  # refused in alarm
     assert reply(ctrl, "MovJ(joint={0,0,90,0,-90,0})").error_id == -2
     assert reply(ctrl, "ClearError()").ok
-    assert ctrl.mode == P.RobotMode.ENABLE
+    assert ctrl.mode == dobot.RobotMode.ENABLE
     assert reply(ctrl, "MovJ(joint={0,0,100,0,-90,0})").ok
 
 
 def test_unreachable_pose_alarms(ctrl):
     assert reply(ctrl, "MovJ(pose={2000,0,300,180,0,0})").ok
     ctrl.tick(0.008)
-    assert ctrl.mode == P.RobotMode.ERROR
-    assert P.parse_error_ids(reply(ctrl, "GetErrorID()").values_text) == [17]
+    assert ctrl.mode == dobot.RobotMode.ERROR
+    assert dobot.parse_error_ids(reply(ctrl, "GetErrorID()").values_text) == [17]
 
 
 def test_movl_follows_a_straight_line(ctrl):
@@ -129,11 +129,11 @@ def test_estop_gates_commands(ctrl):
     assert np.allclose(ctrl.measured.q, q_stop)  # nothing moves
     assert reply(ctrl, "EnableRobot()").error_id == -3
     assert reply(ctrl, "ClearError()").error_id == -3  # release first
-    assert 116 in P.parse_error_ids(reply(ctrl, "GetErrorID()").values_text)
+    assert 116 in dobot.parse_error_ids(reply(ctrl, "GetErrorID()").values_text)
     assert reply(ctrl, "EmergencyStop(0)").ok
     assert reply(ctrl, "ClearError()").ok
     assert reply(ctrl, "EnableRobot()").ok
-    assert ctrl.mode == P.RobotMode.ENABLE
+    assert ctrl.mode == dobot.RobotMode.ENABLE
 
 
 def test_stop_clears_queue(ctrl):
@@ -142,7 +142,7 @@ def test_stop_clears_queue(ctrl):
     run(ctrl, 0.1)
     assert reply(ctrl, "Stop()").ok
     run(ctrl, 0.1)
-    assert ctrl.mode == P.RobotMode.ENABLE and not ctrl.queue
+    assert ctrl.mode == dobot.RobotMode.ENABLE and not ctrl.queue
 
 
 def test_do_is_queued_and_reaches_engine(ctrl):
@@ -155,11 +155,11 @@ def test_do_is_queued_and_reaches_engine(ctrl):
     c = SimController(NOVA5, Recorder(), q0=HOME)
     c.handle("EnableRobot()")
     c.handle("MovJ(joint={10,0,90,0,-90,0})")
-    rid = P.parse_reply(c.handle("DO(1,1)")).result_id
+    rid = dobot.parse_reply(c.handle("DO(1,1)")).result_id
     assert rid == 2 and (c.do_mask & 1) == 0  # waits behind the move
     run(c, 3)
     assert c.do_mask & 1 and outputs[-1] & 1
-    assert P.parse_reply(c.handle("GetDO(1)")).floats() == [1]
+    assert dobot.parse_reply(c.handle("GetDO(1)")).floats() == [1]
     c.handle("ToolDOInstant(1,1)")
     assert outputs[-1] >> 32 & 1  # flange outputs sit above bit 32
 
@@ -167,7 +167,7 @@ def test_do_is_queued_and_reaches_engine(ctrl):
 def test_servoj_overspeed_alarms(ctrl):
     assert reply(ctrl, "ServoJ(90,0,90,0,-90,0,t=0.01)").ok
     ctrl.tick(0.008)
-    assert 48 in P.parse_error_ids(reply(ctrl, "GetErrorID()").values_text)
+    assert 48 in dobot.parse_error_ids(reply(ctrl, "GetErrorID()").values_text)
 
 
 def test_inverse_and_positive_kin(ctrl):
@@ -189,5 +189,5 @@ def test_collision_from_engine_raises_117():
     c = SimController(NOVA5, Crashing(), q0=HOME)
     c.handle("EnableRobot()")
     c.tick(0.008)
-    assert c.mode == P.RobotMode.COLLISION
-    assert P.parse_error_ids(P.parse_reply(c.handle("GetErrorID()")).values_text) == [117]
+    assert c.mode == dobot.RobotMode.COLLISION
+    assert dobot.parse_error_ids(dobot.parse_reply(c.handle("GetErrorID()")).values_text) == [117]

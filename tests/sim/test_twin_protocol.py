@@ -9,7 +9,7 @@ import pytest
 
 from services.common.errors import ControllerError
 from services.common.settings import ReconnectSettings, Settings
-from services.dobot.protocol import RobotMode
+from services.dobot import RobotMode
 from services.kinematics.robot_models import get_robot
 from services.robot.client import DobotClient
 from services.sim.app import build_sim_server
