@@ -17,9 +17,10 @@ from services.common.errors import RobotError
 from services.common.frames import make_transform
 from services.kinematics import analytic
 from services.kinematics.collision import Box, Scene
+from services.kinematics.interpolation import min_jerk_keypose_trajectory
 from services.kinematics.model import Kinematics, load_arm
 from services.kinematics.robot_models import get_robot
-from services.kinematics.trajectory import JointLimits, min_jerk_keypose_trajectory
+from services.kinematics.trajectory import JointLimits
 from services.motion.planner import MotionPlanner, PlannerConfig
 from services.motion.timing import time_parameterize
 

@@ -33,6 +33,7 @@ from services.common.errors import (
 )
 from services.kinematics.cartesian import cartesian_path
 from services.kinematics.collision import CollisionChecker, Scene
+from services.kinematics.interpolation import wrap_toward
 from services.kinematics.model import ArmModel, Kinematics, check_pose, pose_text
 from services.kinematics.trajectory import (
     Array,
@@ -40,7 +41,6 @@ from services.kinematics.trajectory import (
     JointTrajectory,
     LimitReport,
     verify_trajectory,
-    wrap_toward,
 )
 from services.motion.sampling import PLANNERS, plan_path, seed_planning
 from services.motion.timing import time_parameterize

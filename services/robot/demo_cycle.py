@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from services.common.settings import KeyPoseCycleSettings
-from services.kinematics.trajectory import JointLimits, min_jerk_keypose_trajectory
+from services.kinematics.interpolation import min_jerk_keypose_trajectory
+from services.kinematics.trajectory import JointLimits
 from services.robot.driver import RobotDriver
 
 

@@ -306,7 +306,8 @@ class RobotDriver:
         Every segment is checked like any trajectory (joints, speed, workspace) before it is sent;
         there is no obstacle avoidance here — the task service plans collision-free picks."""
         from services.kinematics.cartesian import straight_line_joint_path
-        from services.kinematics.trajectory import JointLimits, min_jerk_keypose_trajectory
+        from services.kinematics.interpolation import min_jerk_keypose_trajectory
+        from services.kinematics.trajectory import JointLimits
 
         if self.limits.T_flange_tool is None:
             raise InvalidInputError("ExecuteGrasp needs the gripper's tool offset (gripper.tcp_offset_m)")

@@ -12,7 +12,8 @@ from services.common.errors import (
     LimitViolationError,
     TrajectoryExecutionError,
 )
-from services.kinematics.trajectory import JointLimits, min_jerk_keypose_trajectory, quintic_move
+from services.kinematics.interpolation import min_jerk_keypose_trajectory, quintic_move
+from services.kinematics.trajectory import JointLimits
 from services.robot.service import build_driver
 from tests.conftest import HOME
 
