@@ -221,7 +221,7 @@ def serve(
         console.print(f"[red]unknown service {service!r}[/red]; available: {', '.join(SERVICES)}")
         raise typer.Exit(2)
     s = _settings(profile, config)
-    from services.apps.launcher import start_metrics_exporter
+    from services.apps.probes import start_metrics_exporter
 
     start_metrics_exporter(s)  # off unless metrics.port is set (compose / Kubernetes)
     if service == "robot":

@@ -9,24 +9,20 @@ serves each child's Prometheus metrics (the child writes them to its own
 ``PROMETHEUS_MULTIPROC_DIR``), restarts a child that dies (and says so), and on
 Ctrl-C stops every child: SIGTERM, then SIGKILL after a grace period.
 
-Also here, for compose/Kubernetes probes and the lead's CLI: :func:`check_health`
-(``python -m services.apps.launcher health <service>``), :func:`start_metrics_exporter`
-(the in-container exporter behind ``PICKPLACE_METRICS__PORT``) and :func:`drive_cycles`
-(enable the arm, run pick cycles through the task service, fresh twin scene between them).
+The processes and their environment come from :mod:`services.apps.topology`; this module's
+command line (``python -m services.apps.launcher health|drive|up``) also serves the compose and
+Kubernetes probes (:mod:`services.apps.probes`) and drives cycles (:mod:`services.apps.cycles`).
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import logging
 import os
 import shutil
 import signal
-import sys
 import time
-import urllib.request
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,282 +30,22 @@ from typing import Annotated, Any
 
 import typer
 
+from services.apps.cycles import drive_cycles
+from services.apps.probes import check_health, serve_metrics_dir
+from services.apps.topology import (
+    MULTIPROC_ENV,
+    SERVICES,
+    LocalPorts,
+    ProcessSpec,
+    child_view,
+    pickplace_program,
+    topology,
+)
 from services.common.aio import run_until_signal
 from services.common.errors import ConfigurationError, RobotCommunicationError
-from services.common.net import free_loopback_ports
 from services.common.settings import REPO_ROOT, Settings, load_settings
 
 log = logging.getLogger("pickplace.launcher")
-
-# Start order: the simulated controller first (the robot driver connects to it), the gateway last.
-SERVICES = ("sim-dobot", "robot", "motion", "grasp", "vision", "task", "gateway")
-GRPC_SERVICES = ("robot", "motion", "grasp", "vision", "task")
-MULTIPROC_ENV = "PROMETHEUS_MULTIPROC_DIR"
-
-# Environment names only containers need: binding every interface, reaching peers by service name.
-CONTAINER_ONLY_ENV = frozenset(
-    {
-        "PICKPLACE_GRPC__HOST",
-        "PICKPLACE_ZENOH__ALLOW_REMOTE",
-        "PICKPLACE_GATEWAY__HOST",
-        "PICKPLACE_GATEWAY__ALLOW_REMOTE",
-        "PICKPLACE_METRICS__HOST",
-        "PICKPLACE_METRICS__ALLOW_REMOTE",
-        "PICKPLACE_METRICS__PORT",
-        "MUJOCO_GL",
-        *(f"PICKPLACE_GRPC__{s.upper()}_HOST" for s in GRPC_SERVICES),
-    }
-)
-# Names only the local run sets: a per-process log file, a throw-away PostgreSQL schema (tests).
-LOCAL_ONLY_ENV = frozenset({"PICKPLACE_LOGGING__FILE", "PICKPLACE_DATABASE__SCHEMA_NAME"})
-
-DEFAULT_METRICS_PORTS = {
-    "sim-dobot": 9100,
-    "robot": 9101,
-    "motion": 9102,
-    "grasp": 9103,
-    "vision": 9104,
-    "task": 9105,
-}
-DEFAULT_ZENOH_PORT = 7447
-
-
-# ---------------------------------------------------------------------------- topology (pure)
-@dataclass(frozen=True)
-class LocalPorts:
-    """Every loopback port of the local topology."""
-
-    zenoh: int
-    grpc: dict[str, int]
-    gateway: int
-    edge: int
-    sim_dashboard: int
-    sim_feedback: int
-    sim_slow: int
-    metrics: dict[str, int]
-
-    @classmethod
-    def from_settings(cls, s: Settings) -> LocalPorts:
-        zenoh_port = DEFAULT_ZENOH_PORT
-        for ep in s.zenoh.listen:
-            with contextlib.suppress(ValueError):
-                zenoh_port = int(ep.rsplit(":", 1)[1])
-                break
-        return cls(
-            zenoh=zenoh_port,
-            grpc={name: getattr(s.grpc, f"{name}_port") for name in GRPC_SERVICES},
-            gateway=s.gateway.port,
-            edge=s.gateway.edge_grpc_port or 0,
-            sim_dashboard=s.sim.dashboard_port,
-            sim_feedback=s.sim.feedback_port,
-            sim_slow=s.sim.slow_feedback_port,
-            metrics=dict(DEFAULT_METRICS_PORTS),
-        )
-
-    @classmethod
-    def free(cls) -> LocalPorts:
-        """All ports chosen free on 127.0.0.1 (tests; two runs side by side)."""
-        ports = free_loopback_ports(12 + len(DEFAULT_METRICS_PORTS))
-        it = iter(ports)
-        return cls(
-            zenoh=next(it),
-            grpc={name: next(it) for name in GRPC_SERVICES},
-            gateway=next(it),
-            edge=next(it),
-            sim_dashboard=next(it),
-            sim_feedback=next(it),
-            sim_slow=next(it),
-            metrics={name: next(it) for name in DEFAULT_METRICS_PORTS},
-        )
-
-    def all(self) -> dict[str, int]:
-        out = {
-            "zenoh": self.zenoh,
-            "gateway": self.gateway,
-            "gateway-edge": self.edge,
-            "sim-dashboard": self.sim_dashboard,
-            "sim-feedback": self.sim_feedback,
-            "sim-slow": self.sim_slow,
-        }
-        out.update({f"grpc-{k}": v for k, v in self.grpc.items()})
-        out.update({f"metrics-{k}": v for k, v in self.metrics.items()})
-        return out
-
-    def check(self) -> None:
-        used = {k: v for k, v in self.all().items() if v}
-        seen: dict[int, str] = {}
-        for name, port in used.items():
-            if port in seen:
-                raise ConfigurationError(f"port {port} is given to both {seen[port]} and {name}")
-            seen[port] = name
-
-
-@dataclass(frozen=True)
-class ProcessSpec:
-    """One child: its name, its command line (after the ``pickplace`` program) and its environment."""
-
-    name: str
-    args: tuple[str, ...]
-    env: dict[str, str]
-    metrics_port: int | None = None
-
-
-def pickplace_program() -> list[str]:
-    """The ``pickplace`` console script of this interpreter's environment (else ``python -m services.apps.cli``)."""
-    script = Path(sys.executable).with_name("pickplace")
-    return [str(script)] if script.exists() else [sys.executable, "-m", "services.apps.cli"]
-
-
-def service_args(name: str) -> tuple[str, ...]:
-    """The command each service runs, the same in compose, Kubernetes and here."""
-    if name == "sim-dobot":
-        return ("sim-dobot", "--engine", "twin")
-    if name not in SERVICES:
-        raise ConfigurationError(f"unknown service {name!r}; the topology has {list(SERVICES)}")
-    return ("serve", name)
-
-
-def topology(
-    settings: Settings,
-    ports: LocalPorts,
-    *,
-    api_token: str,
-    metrics_root: Path | None = None,
-    log_dir: Path | None = None,
-    database_url: str | None = None,
-    seed: int | None = None,
-    state_dir: Path | None = None,
-) -> list[ProcessSpec]:
-    """The child processes of the local run, in start order (pure: no I/O)."""
-    ports.check()
-    common = {
-        "PICKPLACE_PROFILE": settings.profile,
-        "PICKPLACE_CELL_ID": settings.cell_id,
-        "PICKPLACE_ZENOH__MODE": "client",
-        "PICKPLACE_ZENOH__LISTEN": "[]",
-        "PICKPLACE_ZENOH__CONNECT": json.dumps([f"tcp/127.0.0.1:{ports.zenoh}"]),
-        **{f"PICKPLACE_GRPC__{name.upper()}_PORT": str(port) for name, port in ports.grpc.items()},
-    }
-    specific: dict[str, dict[str, str]] = {
-        "sim-dobot": {
-            "PICKPLACE_SIM__ENGINE": "twin",
-            "PICKPLACE_SIM__SEED": str(settings.sim.seed if seed is None else seed),
-            "PICKPLACE_SIM__DASHBOARD_PORT": str(ports.sim_dashboard),
-            "PICKPLACE_SIM__FEEDBACK_PORT": str(ports.sim_feedback),
-            "PICKPLACE_SIM__SLOW_FEEDBACK_PORT": str(ports.sim_slow),
-        },
-        "robot": {
-            "PICKPLACE_ROBOT__DASHBOARD_PORT": str(ports.sim_dashboard),
-            "PICKPLACE_ROBOT__FEEDBACK_PORT": str(ports.sim_feedback),
-        },
-        "gateway": {
-            "PICKPLACE_DATABASE__URL": database_url or settings.database.url,
-            "PICKPLACE_GATEWAY__API_TOKEN": api_token,
-            "PICKPLACE_GATEWAY__PORT": str(ports.gateway),
-            "PICKPLACE_GATEWAY__EDGE_GRPC_PORT": str(ports.edge),
-            # picks held while the database is down survive a gateway restart here
-            "PICKPLACE_GATEWAY__PICK_SPILL_FILE": str(state_dir / "pick_spill.jsonl")
-            if state_dir
-            else str(settings.gateway.pick_spill_file),
-        },
-    }
-    if settings.database.schema_name:
-        specific["gateway"]["PICKPLACE_DATABASE__SCHEMA_NAME"] = settings.database.schema_name
-    specs = []
-    for name in SERVICES:
-        env = {**common, **specific.get(name, {})}
-        if log_dir is not None:
-            env["PICKPLACE_LOGGING__FILE"] = str(log_dir / f"{name}.log")
-        metrics_port = None
-        # The gateway renders its own registry at /metrics; every other service writes to a directory.
-        if name != "gateway" and metrics_root is not None:
-            env[MULTIPROC_ENV] = str(metrics_root / name)
-            metrics_port = ports.metrics[name]
-        specs.append(ProcessSpec(name, service_args(name), env, metrics_port))
-    return specs
-
-
-# ---------------------------------------------------------------------------- health
-def _dial_host(host: str) -> str:
-    return "127.0.0.1" if host in ("0.0.0.0", "", "::") else host
-
-
-async def check_health(settings: Settings, service: str, timeout_s: float = 3.0) -> str:
-    """Is ``service`` up and answering? Returns what was checked; raises RobotCommunicationError if not."""
-    if service == "sim-dobot":
-        host, port = _dial_host(settings.sim.host), settings.sim.dashboard_port
-        try:
-            _r, w = await asyncio.wait_for(asyncio.open_connection(host, port), timeout_s)
-        except (OSError, TimeoutError) as exc:
-            raise RobotCommunicationError(
-                f"simulated Dobot dashboard {host}:{port} not reachable: {exc}"
-            ) from exc
-        w.close()
-        with contextlib.suppress(OSError):
-            await w.wait_closed()
-        return f"sim-dobot dashboard {host}:{port} accepts connections"
-    if service in GRPC_SERVICES:
-        import grpc
-
-        host = _dial_host(settings.grpc.client_host(service))  # type: ignore[arg-type]
-        port = getattr(settings.grpc, f"{service}_port")
-        async with grpc.aio.insecure_channel(f"{host}:{port}") as ch:
-            try:
-                await asyncio.wait_for(ch.channel_ready(), timeout_s)
-            except TimeoutError as exc:
-                raise RobotCommunicationError(
-                    f"{service} gRPC {host}:{port} not ready within {timeout_s} s"
-                ) from exc
-        return f"{service} gRPC {host}:{port} ready"
-    if service == "gateway":
-        url = f"http://{_dial_host(settings.gateway.host)}:{settings.gateway.port}/api/v1/system/status"
-
-        def get() -> int:
-            with urllib.request.urlopen(url, timeout=timeout_s) as r:
-                return int(r.status)
-
-        try:
-            code = await asyncio.to_thread(get)
-        except OSError as exc:
-            raise RobotCommunicationError(f"gateway {url} not answering: {exc}") from exc
-        if code != 200:
-            raise RobotCommunicationError(f"gateway {url} answered HTTP {code}")
-        return f"gateway {url} answers 200"
-    raise ConfigurationError(f"unknown service {service!r}; known: {list(SERVICES)}")
-
-
-# ---------------------------------------------------------------------------- metrics
-def start_metrics_exporter(settings: Settings) -> Any:
-    """Serve this process's metrics on ``metrics.host:metrics.port`` (None = off); returns the server.
-
-    The services keep their metrics on private registries, so the exporter reads what the
-    process wrote to ``PROMETHEUS_MULTIPROC_DIR`` (which must be set before prometheus_client
-    is first imported — the container's environment does that).
-    """
-    if settings.metrics.port is None:
-        return None
-    path = os.environ.get(MULTIPROC_ENV)
-    if not path:
-        raise ConfigurationError(
-            f"metrics.port {settings.metrics.port} needs {MULTIPROC_ENV} set to a directory"
-        )
-    Path(path).mkdir(parents=True, exist_ok=True)
-    return serve_metrics_dir(Path(path), settings.metrics.host, settings.metrics.port)
-
-
-def serve_metrics_dir(path: Path, host: str, port: int) -> Any:
-    """An HTTP ``/metrics`` of every metric written under ``path`` (prometheus-client's multiprocess files)."""
-    from prometheus_client import CollectorRegistry, start_http_server
-    from prometheus_client.multiprocess import MultiProcessCollector
-
-    path.mkdir(parents=True, exist_ok=True)
-    registry = CollectorRegistry()
-    MultiProcessCollector(registry, path=str(path))
-    try:
-        server, _thread = start_http_server(port, host, registry=registry)
-    except OSError as exc:
-        raise RobotCommunicationError(f"cannot serve metrics on {host}:{port}: {exc}") from exc
-    return server
 
 
 # ---------------------------------------------------------------------------- the process supervisor
@@ -570,105 +306,6 @@ class Launcher:
         raise RobotCommunicationError(
             f"{name} was not restarted {restarts} time(s) and healthy within {timeout_s} s"
         )
-
-
-def child_view(settings: Settings, ports: LocalPorts) -> Settings:
-    """The settings as the children see them (their ports), for health checks and clients in this process."""
-    grpc = settings.grpc.model_copy(update={f"{n}_port": p for n, p in ports.grpc.items()})
-    sim = settings.sim.model_copy(
-        update={
-            "dashboard_port": ports.sim_dashboard,
-            "feedback_port": ports.sim_feedback,
-            "slow_feedback_port": ports.sim_slow,
-        }
-    )
-    gw = settings.gateway.model_copy(update={"port": ports.gateway, "edge_grpc_port": ports.edge})
-    zenoh = settings.zenoh.model_copy(
-        update={"mode": "client", "listen": [], "connect": [f"tcp/127.0.0.1:{ports.zenoh}"]}
-    )
-    return settings.model_copy(update={"grpc": grpc, "sim": sim, "gateway": gw, "zenoh": zenoh})
-
-
-# ---------------------------------------------------------------------------- driving the cell
-async def enable_robot(settings: Settings) -> None:
-    from pickplace.v1 import robot_pb2, robot_pb2_grpc
-
-    from services.common.grpc_util import channel, rpc_errors
-
-    async with channel(settings.grpc.client_host("robot"), settings.grpc.robot_port) as ch:
-        with rpc_errors():
-            await robot_pb2_grpc.RobotControllerStub(ch).Enable(robot_pb2.EnableRequest(), timeout=30.0)
-
-
-async def park_arm(settings: Settings) -> None:
-    """After a cycle that gave up: clear alarms, open the jaws and go to SAFE_HOME (out of the camera's view)."""
-    import numpy as np
-    from pickplace.v1 import robot_pb2, robot_pb2_grpc
-
-    from services.common.grpc_util import channel, rpc_errors
-
-    home = np.deg2rad(settings.grasp.safe_home_joints_deg[settings.robot.model]).tolist()
-    async with channel(settings.grpc.client_host("robot"), settings.grpc.robot_port) as ch:
-        stub = robot_pb2_grpc.RobotControllerStub(ch)
-        with rpc_errors():
-            await stub.ClearError(robot_pb2.ClearErrorRequest(), timeout=30.0)
-            await stub.Enable(robot_pb2.EnableRequest(), timeout=30.0)
-            await stub.SetGripper(robot_pb2.SetGripperRequest(close=False), timeout=30.0)
-            await stub.MoveJoints(robot_pb2.MoveJointsRequest(positions=home), timeout=120.0)
-
-
-async def run_single_cycle(settings: Settings, task: str = "", timeout_s: float = 300.0) -> Any:
-    """One pick cycle through the task service's gRPC; returns its PickEvent."""
-    from pickplace.v1 import task_pb2, task_pb2_grpc
-
-    from services.common.grpc_util import channel, rpc_errors
-
-    async with channel(settings.grpc.client_host("task"), settings.grpc.task_port) as ch:
-        with rpc_errors():
-            return await task_pb2_grpc.TaskControllerStub(ch).RunSingleCycle(
-                task_pb2.SingleCycleRequest(task=task), timeout=timeout_s
-            )
-
-
-async def drive_cycles(
-    settings: Settings,
-    cycles: int = 0,
-    on_pick: Callable[[Any], None] | None = None,
-    pause_s: float | None = None,
-) -> list[Any]:
-    """Enable the arm, then run cycles (0 = until cancelled), with a fresh twin scene after each."""
-    from services.common.bus import Bus
-    from services.sim.bus_link import request_scene_reset
-
-    await enable_robot(settings)
-    picks: list[Any] = []
-    pause = settings.task.pause_between_cycles_s if pause_s is None else pause_s
-    zs = settings.zenoh.model_copy(update={"mode": "client", "listen": []})
-    async with Bus(zs) as bus:
-        n = 0
-        while cycles == 0 or n < cycles:
-            n += 1
-            try:
-                event = await run_single_cycle(settings, settings.task.task)
-            except Exception as exc:  # a crashed service mid-cycle: say so, wait, go on
-                log.warning("cycle %d did not complete: %s", n, exc)
-                await asyncio.sleep(2.0)
-                continue
-            picks.append(event)
-            if on_pick is not None:
-                on_pick(event)
-            if not event.success:
-                try:
-                    await park_arm(settings)
-                except Exception as exc:
-                    log.warning("could not park the arm after cycle %d: %s", n, exc)
-            if settings.task.reset_scene_each_cycle and (cycles == 0 or n < cycles):
-                try:
-                    await request_scene_reset(bus, settings.cell_id)
-                except Exception as exc:
-                    log.warning("no fresh scene after cycle %d: %s", n, exc)
-            await asyncio.sleep(pause)
-    return picks
 
 
 # ---------------------------------------------------------------------------- `pickplace up --processes`

@@ -15,7 +15,7 @@ import typer
 import yaml
 from pydantic import BaseModel
 
-from services.apps.launcher import (
+from services.apps.topology import (
     CONTAINER_ONLY_ENV,
     DEFAULT_METRICS_PORTS,
     LOCAL_ONLY_ENV,

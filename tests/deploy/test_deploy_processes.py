@@ -14,15 +14,9 @@ import urllib.request
 import pytest
 from pickplace.v1 import task_pb2
 
-from services.apps.launcher import (
-    SERVICES,
-    Launcher,
-    LocalPorts,
-    enable_robot,
-    park_arm,
-    run_single_cycle,
-    topology,
-)
+from services.apps.cycles import enable_robot, park_arm, run_single_cycle
+from services.apps.launcher import Launcher
+from services.apps.topology import SERVICES, LocalPorts, topology
 from services.common.bus import Bus
 from services.common.keys import CellKeys
 from services.common.settings import load_settings
