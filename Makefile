@@ -35,6 +35,7 @@ test: install
 lint: install
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check services gateway tests bench
+	$(VENV)/bin/mypy
 
 proto: install
 	$(PY) -m services.common.protogen

@@ -26,7 +26,7 @@ class ReadCache:
         hit = self._values.get(key)
         if hit is not None and now - hit[0] < self.ttl_s:
             self.hits += 1
-            return hit[1]  # type: ignore[no-any-return]
+            return hit[1]
         self.misses += 1
         value = await compute()
         self._values[key] = (now, value)

@@ -19,6 +19,7 @@ from sqlalchemy.ext.asyncio import AsyncSession, async_sessionmaker
 
 from gateway.db.models import Calibration
 from gateway.db.repository import CalibrationRepository
+from gateway.schemas import CalibrationStatus
 from services.common.errors import ExecutionError, RobotCommunicationError, RobotError
 
 log = logging.getLogger("pickplace.gateway.calibration")
@@ -42,7 +43,7 @@ class CalibrationRun:
     run_id: str
     num_poses: int
     started_at: datetime
-    status: str = "running"
+    status: CalibrationStatus = CalibrationStatus.RUNNING
     progress: float = 0.0
     message: str = "starting"
     outcome: CalibrationOutcome | None = None
@@ -62,7 +63,7 @@ class CalibrationRuns:
         self.runs: dict[str, CalibrationRun] = {}
 
     def active(self) -> CalibrationRun | None:
-        return next((r for r in self.runs.values() if r.status == "running"), None)
+        return next((r for r in self.runs.values() if r.status is CalibrationStatus.RUNNING), None)
 
     async def start(self, num_poses: int) -> CalibrationRun:
         if self.executor is None:
@@ -80,7 +81,7 @@ class CalibrationRuns:
                     timestamp=run.started_at,
                     robot_id=self.robot_id,
                     calibration_type="hand_eye",
-                    status="running",
+                    status=run.status.value,
                     num_poses=num_poses,
                 )
             )
@@ -98,15 +99,19 @@ class CalibrationRuns:
 
         try:
             run.outcome = await self.executor(run.num_poses, progress)
-            run.status, run.progress, run.message = "succeeded", 1.0, run.outcome.notes or "done"
+            run.status, run.progress, run.message = (
+                CalibrationStatus.SUCCEEDED,
+                1.0,
+                run.outcome.notes or "done",
+            )
         except asyncio.CancelledError:
-            run.status, run.message = "failed", "cancelled (gateway shutting down)"
+            run.status, run.message = CalibrationStatus.FAILED, "cancelled (gateway shutting down)"
             raise
         except RobotError as exc:
-            run.status, run.message = "failed", f"{type(exc).__name__}: {exc}"
+            run.status, run.message = CalibrationStatus.FAILED, f"{type(exc).__name__}: {exc}"
         except Exception as exc:
             log.exception("calibration %s crashed", run.run_id)
-            run.status, run.message = "failed", f"{type(exc).__name__}: {exc}"
+            run.status, run.message = CalibrationStatus.FAILED, f"{type(exc).__name__}: {exc}"
         finally:
             await self._record(run)
 
@@ -115,7 +120,7 @@ class CalibrationRuns:
             async with self.sessions() as s:
                 row = await CalibrationRepository(s).by_run_id(run.run_id)
                 if row is not None:
-                    row.status = run.status
+                    row.status = run.status.value
                     row.notes = run.message
                     if run.outcome is not None:
                         row.parameters = run.outcome.parameters
@@ -131,6 +136,7 @@ class CalibrationRuns:
             row = await CalibrationRepository(s).by_run_id(run_id)
         if row is None:
             return None
+        recorded = CalibrationStatus(row.status)
         outcome = None
         if row.parameters is not None:
             outcome = CalibrationOutcome(row.parameters, row.reprojection_error, row.notes or "")
@@ -138,9 +144,11 @@ class CalibrationRuns:
             run_id=row.run_id,
             num_poses=row.num_poses or 0,
             started_at=row.timestamp,
-            status=row.status if row.status != "running" else "failed",  # a run the previous process lost
-            progress=1.0 if row.status == "succeeded" else 0.0,
-            message=row.notes or ("interrupted: the gateway restarted" if row.status == "running" else ""),
+            # a run still "running" in the database is one the previous process lost
+            status=CalibrationStatus.FAILED if recorded is CalibrationStatus.RUNNING else recorded,
+            progress=1.0 if recorded is CalibrationStatus.SUCCEEDED else 0.0,
+            message=row.notes
+            or ("interrupted: the gateway restarted" if recorded is CalibrationStatus.RUNNING else ""),
             outcome=outcome,
         )
 

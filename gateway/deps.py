@@ -12,11 +12,11 @@ from gateway.db.repository import PickRepository
 from gateway.security import require_token
 
 if TYPE_CHECKING:
-    from gateway.app import Cell
+    from gateway.state import Cell
 
 
 def get_cell(request: Request) -> Cell:
-    return request.app.state.cell  # type: ignore[no-any-return]
+    return request.app.state.cell
 
 
 CellDep = Annotated["Cell", Depends(get_cell)]

@@ -70,7 +70,8 @@ def install(app: FastAPI) -> None:
         code = status_for(exc)
         if code >= 500 and code != 503:
             log.error("request failed: %s: %s", type(exc).__name__, exc)
-        extra = {"errors": exc.errors} if isinstance(getattr(exc, "errors", None), list) else {}
+        errors = getattr(exc, "errors", None)
+        extra = {"errors": errors} if isinstance(errors, list) else {}
         return JSONResponse(error_body(type(exc).__name__, str(exc), **extra), status_code=code)
 
     @app.exception_handler(RequestValidationError)

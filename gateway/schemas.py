@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from datetime import datetime
+from enum import StrEnum
 from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
@@ -135,9 +136,15 @@ class CalibrationStarted(BaseModel):
     calibration_id: str
 
 
+class CalibrationStatus(StrEnum):
+    RUNNING = "running"
+    SUCCEEDED = "succeeded"
+    FAILED = "failed"
+
+
 class CalibrationView(BaseModel):
     calibration_id: str
-    status: Literal["running", "succeeded", "failed"]
+    status: CalibrationStatus
     progress: float = Field(description="[0, 1]")
     message: str = ""
     num_poses: int | None = None

@@ -27,7 +27,7 @@ async def start_calibration(
 def _view(run: CalibrationRun) -> CalibrationView:
     return CalibrationView(
         calibration_id=run.run_id,
-        status=run.status,  # type: ignore[arg-type]
+        status=run.status,
         progress=run.progress,
         message=run.message,
         num_poses=run.num_poses,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 import time
 from datetime import UTC, datetime
+from typing import TYPE_CHECKING, Literal
 
 from fastapi import APIRouter, Body
 
@@ -20,6 +21,9 @@ from gateway.schemas import (
     TaskSummary,
 )
 
+if TYPE_CHECKING:
+    from gateway.state import Cell
+
 log = logging.getLogger("pickplace.gateway.system")
 router = APIRouter(prefix="/system", tags=["system"])
 
@@ -27,11 +31,11 @@ router = APIRouter(prefix="/system", tags=["system"])
 TASK_STATUS_FRESH_S = 5.0
 
 
-def _robot_summary(cell) -> RobotSummary:  # type: ignore[no-untyped-def]
+def _robot_summary(cell: Cell) -> RobotSummary:
     return RobotSummary(**(cell.hub.robot_status or {"connected": False, "error": "no status yet"}))
 
 
-def _task_summary(cell) -> TaskSummary | None:  # type: ignore[no-untyped-def]
+def _task_summary(cell: Cell) -> TaskSummary | None:
     if cell.hub.task_status is None or cell.task_status_at is None:
         return None
     age = time.monotonic() - cell.task_status_at
@@ -48,7 +52,7 @@ def _state(robot: RobotSummary, task: TaskSummary | None) -> str:
     return "IDLE" if robot.connected else "OFFLINE"
 
 
-def cell_state(cell) -> str:  # type: ignore[no-untyped-def]
+def cell_state(cell: Cell) -> str:
     return _state(_robot_summary(cell), _task_summary(cell))
 
 
@@ -57,7 +61,8 @@ async def get_status(cell: CellDep) -> SystemStatus:
     """The cell at a glance. Answers even while the database or a service is down."""
     robot, task = _robot_summary(cell), _task_summary(cell)
     state = _state(robot, task)
-    picks_today, success_rate, db_state = 0, None, "ok"
+    picks_today, success_rate = 0, None
+    db_state: Literal["ok", "unavailable"] = "ok"
     try:
 
         async def today() -> tuple[int, int]:
@@ -122,7 +127,7 @@ async def estop_release(cell: CellDep) -> CommandResult:
     return CommandResult(success=True, message="e-stop released, alarms cleared, arm enabled")
 
 
-async def _refresh_robot_status(cell) -> None:  # type: ignore[no-untyped-def]
+async def _refresh_robot_status(cell: Cell) -> None:
     asked = time.monotonic()
     try:
         cell.hub.on_robot_status(await cell.clients.robot_status(), asked_at=asked)

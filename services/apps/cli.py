@@ -7,7 +7,7 @@ import json
 import logging
 import sys
 from collections.abc import Callable, Coroutine
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import numpy as np
 import typer
@@ -23,6 +23,10 @@ from services.common.logs import setup_logging
 from services.common.net import free_loopback_port
 from services.common.settings import Settings, load_settings
 from services.sim.twin.cli import app as twin_app
+
+if TYPE_CHECKING:
+    import grpc.aio
+    from pickplace.v1.robot_pb2_grpc import RobotControllerStub
 
 app = typer.Typer(
     help="pickplace: vision-guided pick-and-place cell controller",
@@ -252,7 +256,7 @@ def _scene_reset_between_cycles(s: Settings) -> Callable[[Bus], object] | None:
 
 
 # ---------------------------------------------------------------------------- robot operator CLI
-def _robot_stub(s: Settings):  # type: ignore[no-untyped-def]
+def _robot_stub(s: Settings) -> tuple[grpc.aio.Channel, RobotControllerStub]:
     from pickplace.v1 import robot_pb2_grpc
 
     from services.common.grpc_util import channel
@@ -291,7 +295,7 @@ def robot_status(profile: ProfileOpt = None, config: ConfigOpt = None) -> None:
     )
 
 
-def _simple(method: str, request_factory: str, **kw: Any):  # type: ignore[no-untyped-def]
+def _simple(method: str, request_factory: str, **kw: Any) -> Callable[[ProfileOpt, ConfigOpt], None]:
     def cmd(profile: ProfileOpt = None, config: ConfigOpt = None) -> None:
         from pickplace.v1 import robot_pb2
 

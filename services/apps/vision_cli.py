@@ -14,7 +14,7 @@ import asyncio
 import contextlib
 from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
 import typer
@@ -29,6 +29,12 @@ from services.common.errors import (
 )
 from services.common.sensors import Camera
 from services.common.settings import REPO_ROOT, Settings, load_settings
+
+if TYPE_CHECKING:
+    import grpc.aio
+    from pickplace.v1.robot_pb2_grpc import RobotControllerStub
+
+    from services.vision.results import DetectionResult
 
 app = typer.Typer(
     help="Vision: detect on recordings, record frames, calibrate the camera.", no_args_is_help=True
@@ -130,7 +136,7 @@ def vision_detect(
         raise _fail(exc) from None
 
 
-def _print_result(result, seq: int) -> None:  # type: ignore[no-untyped-def]
+def _print_result(result: DetectionResult, seq: int) -> None:
     table = Table(title=f"frame {seq}: {result.timings_ms.get('total', 0):.1f} ms")
     for col in ("object", "frame", "x (m)", "y (m)", "z (m)", "details"):
         table.add_column(col)
@@ -150,10 +156,14 @@ def _print_result(result, seq: int) -> None:  # type: ignore[no-untyped-def]
         )
         table.add_row(f"{cube.color_label} cube", frame_name, *(f"{v:.4f}" for v in p), f"{cube.n_points} px")
     for box in result.obstacles:
-        lo, hi = (box.min_base, box.max_base) if box.min_base is not None else (box.min_cam, box.max_cam)
+        frame_name, lo, hi = (
+            ("base", box.min_base, box.max_base)
+            if box.min_base is not None and box.max_base is not None
+            else ("camera", box.min_cam, box.max_cam)
+        )
         table.add_row(
             "obstacle",
-            "base" if box.min_base is not None else "camera",
+            frame_name,
             *(f"{a:.3f}..{b:.3f}" for a, b in zip(lo, hi, strict=True)),
             box.color_label,
         )
@@ -189,7 +199,13 @@ def record(
 class GrpcCalibrationRobot:
     """The robot-driver service as a CalibrationRobot: IK (closed form) + MoveJoints, FK of measured joints."""
 
-    def __init__(self, settings: Settings, speed_ratio: int = 20, settle_s: float = 0.5, stub: object = None):
+    def __init__(
+        self,
+        settings: Settings,
+        speed_ratio: int = 20,
+        settle_s: float = 0.5,
+        stub: RobotControllerStub | None = None,
+    ):
         from services.kinematics.robot_models import get_robot
 
         self.settings = settings
@@ -197,7 +213,7 @@ class GrpcCalibrationRobot:
         self.speed_ratio = speed_ratio
         self.settle_s = settle_s
         self._stub = stub
-        self._channel = None
+        self._channel: grpc.aio.Channel | None = None
 
     async def __aenter__(self) -> GrpcCalibrationRobot:
         if self._stub is None:
@@ -213,14 +229,19 @@ class GrpcCalibrationRobot:
         if self._channel is not None:
             await self._channel.close()
 
+    def _robot(self) -> RobotControllerStub:
+        if self._stub is None:
+            raise RuntimeError("GrpcCalibrationRobot is used inside `async with` only")
+        return self._stub
+
     async def _joints(self) -> np.ndarray:
         from pickplace.v1 import robot_pb2
 
         from services.common.grpc_util import rpc_errors
 
         with rpc_errors():
-            js = await self._stub.GetJointStates(
-                robot_pb2.GetJointStatesRequest(),  # type: ignore[union-attr]
+            js = await self._robot().GetJointStates(
+                robot_pb2.GetJointStatesRequest(),
                 timeout=self.settings.grpc.request_timeout_s,
             )
         return np.asarray(js.position, dtype=float)
@@ -233,7 +254,7 @@ class GrpcCalibrationRobot:
 
         q = solve_nearest(self.spec, T_base_gripper, await self._joints())  # IKFailureError when unreachable
         with rpc_errors():
-            reply = await self._stub.MoveJoints(  # type: ignore[union-attr]
+            reply = await self._robot().MoveJoints(
                 robot_pb2.MoveJointsRequest(positions=[float(v) for v in q], speed_ratio=self.speed_ratio),
                 timeout=self.settings.robot.motion_timeout_s,
             )
@@ -281,6 +302,7 @@ async def _twin_calibration_cell(settings: Settings) -> AsyncIterator[tuple[Came
     from services.robot.service import RobotService
     from services.sim.app import build_sim_server
     from services.sim.twin.camera import TwinCamera
+    from services.sim.twin.engine import TwinEngine
 
     server = build_sim_server(
         settings,
@@ -297,7 +319,12 @@ async def _twin_calibration_cell(settings: Settings) -> AsyncIterator[tuple[Came
             }
         )
         s = settings.model_copy(update={"robot": robot})
-        camera = TwinCamera(server.controller.engine, seed=settings.sim.seed)
+        engine = server.controller.engine
+        if not isinstance(engine, TwinEngine):  # build_sim_server(…, "twin") builds one
+            raise ConfigurationError(
+                f"the twin calibration cell needs the twin engine, got {type(engine).__name__}"
+            )
+        camera = TwinCamera(engine, seed=settings.sim.seed)
         try:
             async with RobotService(s, bus=None, grpc_port=0) as svc:
                 await svc.driver.enable()

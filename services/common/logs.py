@@ -9,13 +9,15 @@ from pathlib import Path
 from services.common.settings import REPO_ROOT, LoggingSettings
 
 FORMAT = "%(asctime)s %(levelname)-7s %(name)s: %(message)s"
+# The name of the handlers setup_logging installs, so that a second call replaces them.
+HANDLER_NAME = "pickplace"
 
 
 def setup_logging(settings: LoggingSettings, console: bool = True) -> None:
     root = logging.getLogger()
     root.setLevel(settings.level)
     for h in list(root.handlers):
-        if getattr(h, "_pickplace", False):
+        if h.name == HANDLER_NAME:
             root.removeHandler(h)
     handlers: list[logging.Handler] = []
     if console:
@@ -33,7 +35,7 @@ def setup_logging(settings: LoggingSettings, console: bool = True) -> None:
         fh.setFormatter(logging.Formatter(FORMAT))
         handlers.append(fh)
     for h in handlers:
-        h._pickplace = True  # type: ignore[attr-defined]
+        h.set_name(HANDLER_NAME)
         root.addHandler(h)
     # toppra reports every infeasible grid point it retries around; our timing handles those
     logging.getLogger("toppra").setLevel(logging.ERROR)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
+from typing import Final
 
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, generate_latest
 from prometheus_client import multiprocess as prom_multiprocess
@@ -24,6 +25,8 @@ MULTIPROC_ENV = "PROMETHEUS_MULTIPROC_DIR"
 CYCLE_TIME_BUCKETS_S = (2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 15.0, 20.0, 30.0, 45.0, 60.0, 120.0)
 # Vision and planning: milliseconds to seconds (LLD §16.1 latency budget).
 LATENCY_BUCKETS_S = (0.005, 0.01, 0.025, 0.05, 0.1, 0.2, 0.3, 0.5, 1.0, 2.0, 5.0, 10.0)
+# In multi-process mode gauges need an aggregation rule; "mostrecent" keeps the newest value.
+LIVE_GAUGE_MODE: Final = "mostrecent"
 
 
 def multiprocess_dir() -> str | None:
@@ -36,8 +39,6 @@ class CellMetrics:
     def __init__(self, registry: CollectorRegistry | None = None):
         self.registry = registry if registry is not None else CollectorRegistry(auto_describe=True)
         r = self.registry
-        # In multi-process mode gauges need an aggregation rule; "mostrecent" keeps the newest value.
-        live = {"multiprocess_mode": "mostrecent"}
         self.pick_success = Counter(
             "pick_success", "Successful picks", ["robot_id", "object_class"], registry=r
         )
@@ -56,7 +57,7 @@ class CellMetrics:
             "Quality score [0, 1] of the latest executed grasp",
             ["robot_id"],
             registry=r,
-            **live,
+            multiprocess_mode=LIVE_GAUGE_MODE,
         )
         self.vision_latency = Histogram(
             "vision_latency_seconds",
@@ -77,21 +78,24 @@ class CellMetrics:
             "Measured joint position",
             ["robot_id", "joint"],
             registry=r,
-            **live,
+            multiprocess_mode=LIVE_GAUGE_MODE,
         )
         self.robot_mode = Gauge(
             "robot_mode",
             "Dobot RobotMode code (5 = enabled idle, 7 = running, 9 = error)",
             ["robot_id"],
             registry=r,
-            **live,
+            multiprocess_mode=LIVE_GAUGE_MODE,
         )
         self.estop = Counter(
             "emergency_stop", "Emergency stops requested", ["robot_id", "source"], registry=r
         )
         self.picks_persisted = Counter("picks_persisted", "Pick events written to the database", registry=r)
         self.pick_buffer_depth = Gauge(
-            "pick_buffer_depth", "Pick events waiting for the database", registry=r, **live
+            "pick_buffer_depth",
+            "Pick events waiting for the database",
+            registry=r,
+            multiprocess_mode=LIVE_GAUGE_MODE,
         )
 
     def observe_pick(

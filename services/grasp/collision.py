@@ -9,6 +9,7 @@ clearance during the carry themselves).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 
 import numpy as np
@@ -38,13 +39,10 @@ class MotionCollisionCheck:
         box_y_extension_m: float = 0.0,
     ):
         self.arm = arm
-        self._scene_kw = {
-            "boxes": tuple(boxes),
-            "table_z": table_z,
-            "padding_m": padding_m,
-            "box_y_extension_m": box_y_extension_m,
-        }
-        self._free = CollisionChecker(arm, Scene(**self._scene_kw))  # type: ignore[arg-type]
+        self._scene = Scene(
+            boxes=tuple(boxes), table_z=table_z, padding_m=padding_m, box_y_extension_m=box_y_extension_m
+        )
+        self._free = CollisionChecker(arm, self._scene)
         self._held: dict[bytes, CollisionChecker] = {}
 
     @classmethod
@@ -70,7 +68,9 @@ class MotionCollisionCheck:
                 size=held.size if held.shape == "box" else (0.05, 0.05, 0.05),
                 T_tool_object=tuple(tuple(float(v) for v in row) for row in T),
             )
-            scene = Scene(**self._scene_kw, attached=attached, allowed=frozenset({(ATTACHED, TABLE)}))  # type: ignore[arg-type]
+            scene = dataclasses.replace(
+                self._scene, attached=attached, allowed=frozenset({(ATTACHED, TABLE)})
+            )
             checker = CollisionChecker(self.arm, scene)
             self._held[key] = checker
         return checker

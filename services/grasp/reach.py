@@ -125,7 +125,7 @@ def track_paths(
         was_alive = alive
         alive = alive & (best_step <= limits.jump_threshold_rad)
         died = was_alive.any(axis=1) & ~alive.any(axis=1)
-        for b in np.nonzero(died)[0]:
+        for b in np.nonzero(died)[0].tolist():
             fail_at[b] = k
             if not valid[b, k].any():
                 reason[b] = f"no IK solution at {names[k]}"
@@ -161,7 +161,7 @@ def track_paths(
     best = np.argmin(cost, axis=1)
     ok = alive[np.arange(B), best]
     q_best = path[np.arange(B), best]
-    for b in np.nonzero(ok)[0]:
+    for b in np.nonzero(ok)[0].tolist():
         reason[b] = ""
         fail_at[b] = -1
     return TrackResult(ok, q_best, cost[np.arange(B), best], reason, fail_at)

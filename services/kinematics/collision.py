@@ -20,6 +20,7 @@ import functools
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import coal
 import numpy as np
@@ -152,7 +153,7 @@ class Scene:
         if len(set(names)) != len(names):
             raise InvalidInputError(f"box names must be unique, got {names}")
         object.__setattr__(self, "boxes", tuple(self.boxes))
-        object.__setattr__(self, "allowed", frozenset(tuple(sorted(p)) for p in self.allowed))  # type: ignore[misc]
+        object.__setattr__(self, "allowed", frozenset(tuple(sorted(p)) for p in self.allowed))
 
 
 def _group(name: str) -> str:
@@ -333,7 +334,7 @@ def _bisection_order(n: int) -> tuple[int, ...]:
     """Indices 0..n: the two ends, then midpoints of ever finer halvings (van der Corput order)."""
     order = [n, 0]
     seen = {0, n}
-    step = n
+    step: float = n
     while step > 1:
         half = step / 2
         k = half
@@ -348,7 +349,7 @@ def _bisection_order(n: int) -> tuple[int, ...]:
     return tuple(order)
 
 
-def scene_from_boxes(boxes: Iterable[Sequence[float]], **kwargs: object) -> Scene:
+def scene_from_boxes(boxes: Iterable[Sequence[float]], **kwargs: Any) -> Scene:
     """Scene from seed-004 style bounds (x_min, x_max, y_min, y_max, z_min, z_max) per box."""
     out = []
     for k, b in enumerate(boxes):
@@ -357,5 +358,6 @@ def scene_from_boxes(boxes: Iterable[Sequence[float]], **kwargs: object) -> Scen
             raise InvalidInputError(
                 f"box {k} needs 6 bounds (x_min, x_max, y_min, y_max, z_min, z_max), got {vals}"
             )
-        out.append(Box.from_bounds(*vals, name=f"box{k}"))
-    return Scene(boxes=tuple(out), **kwargs)  # type: ignore[arg-type]
+        x_min, x_max, y_min, y_max, z_min, z_max = vals
+        out.append(Box.from_bounds(x_min, x_max, y_min, y_max, z_min, z_max, name=f"box{k}"))
+    return Scene(boxes=tuple(out), **kwargs)

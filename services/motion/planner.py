@@ -31,6 +31,7 @@ from services.common.errors import (
     PathPlanningTimeoutError,
     TrajectoryLimitError,
 )
+from services.common.settings import MotionSettings
 from services.kinematics.cartesian import cartesian_path
 from services.kinematics.collision import CollisionChecker, Scene
 from services.kinematics.interpolation import wrap_toward
@@ -90,21 +91,19 @@ class PlannerConfig:
                 raise InvalidInputError(f"{name} must be within (0, 1], got {v}")
 
     @classmethod
-    def from_settings(cls, motion: object) -> PlannerConfig:
-        """From ``services.common.settings.MotionSettings``."""
-        m = motion
+    def from_settings(cls, m: MotionSettings) -> PlannerConfig:
         return cls(
-            planner=m.planner,  # type: ignore[attr-defined]
-            time_budget_s=m.planning_time_s,  # type: ignore[attr-defined]
-            collision_resolution_rad=math.radians(m.collision_resolution_deg),  # type: ignore[attr-defined]
-            velocity_scale=m.velocity_scale,  # type: ignore[attr-defined]
-            acceleration_scale=m.acceleration_scale,  # type: ignore[attr-defined]
-            knot_period_s=m.knot_period_s,  # type: ignore[attr-defined]
-            cartesian_step_m=m.cartesian_step_m,  # type: ignore[attr-defined]
-            cartesian_step_rad=math.radians(m.cartesian_step_deg),  # type: ignore[attr-defined]
-            jump_threshold_rad=math.radians(m.jump_threshold_deg),  # type: ignore[attr-defined]
-            min_manipulability=m.min_manipulability,  # type: ignore[attr-defined]
-            seed=m.seed,  # type: ignore[attr-defined]
+            planner=m.planner,
+            time_budget_s=m.planning_time_s,
+            collision_resolution_rad=math.radians(m.collision_resolution_deg),
+            velocity_scale=m.velocity_scale,
+            acceleration_scale=m.acceleration_scale,
+            knot_period_s=m.knot_period_s,
+            cartesian_step_m=m.cartesian_step_m,
+            cartesian_step_rad=math.radians(m.cartesian_step_deg),
+            jump_threshold_rad=math.radians(m.jump_threshold_deg),
+            min_manipulability=m.min_manipulability,
+            seed=m.seed,
         )
 
 
@@ -225,11 +224,11 @@ class MotionPlanner:
             if not isinstance(wp, Waypoint):
                 raise InvalidInputError(f"waypoint {k} is not a Waypoint: {wp!r}")
             if wp.motion == "linear":
-                target = (
-                    check_pose(wp.pose, f"waypoint {k} pose")
-                    if wp.pose is not None
-                    else self.kin.fk(self.limits.check_positions(wp.joints, f"waypoint {k} joints"))
-                )
+                if wp.pose is not None:
+                    target = check_pose(wp.pose, f"waypoint {k} pose")
+                else:
+                    assert wp.joints is not None  # a Waypoint holds exactly one of the two
+                    target = self.kin.fk(self.limits.check_positions(wp.joints, f"waypoint {k} joints"))
                 path = self._cartesian(q, [target])
                 how = "cartesian"
                 method = "toppra_dense"
@@ -237,6 +236,7 @@ class MotionPlanner:
                 if wp.pose is not None:
                     goal = self.goal_for_pose(check_pose(wp.pose, f"waypoint {k} pose"), q)
                 else:
+                    assert wp.joints is not None  # a Waypoint holds exactly one of the two
                     goal = self.limits.check_positions(wp.joints, f"waypoint {k} joints")
                     self._require_free(goal, f"waypoint {k}")
                 # the budget is for planning: time spent timing earlier pieces does not count

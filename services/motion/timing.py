@@ -43,7 +43,7 @@ def time_grid(duration: float, dt: float) -> Array:
     if duration <= 0:
         return np.zeros(1)
     n = max(1, round(duration / dt))
-    ts = np.arange(n + 1) * dt
+    ts = np.arange(n + 1, dtype=float) * dt
     ts[-1] = duration
     return ts
 
@@ -208,7 +208,7 @@ def _smooth_profile(
     out = OutputParameter(1)
     inp.max_velocity, inp.max_acceleration, inp.max_jerk = [vmax], [amax], [jerk_s]
     inp.current_position, inp.current_velocity, inp.current_acceleration = [0.0], [0.0], [0.0]
-    ts = np.arange(1, math.ceil(profile.duration / dt) + 1) * dt
+    ts = np.arange(1, math.ceil(profile.duration / dt) + 1, dtype=float) * dt
     s_ref, sd_ref, sdd_ref = profile(ts)
     rows = [(0.0, 0.0, 0.0, 0.0)]
     max_steps = ts.size + int(30.0 / dt)

@@ -24,10 +24,11 @@ import enum
 import logging
 import random
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from services import dobot
 from services.common.errors import (
@@ -451,11 +452,11 @@ class DobotClient:
                 f"EmergencyStop refused with ErrorID {reply.error_id}", error_id=reply.error_id
             )
 
-    async def positive_kin(self, q: Sequence[float]) -> np.ndarray:
-        q = finite_vector(q, 6, "joints")
-        return dobot_pose_to_transform((await self.request(dobot.positive_kin(np.rad2deg(q)))).floats())
+    async def positive_kin(self, q: ArrayLike) -> np.ndarray:
+        q_rad = finite_vector(q, 6, "joints")
+        return dobot_pose_to_transform((await self.request(dobot.positive_kin(np.rad2deg(q_rad)))).floats())
 
-    async def inverse_kin(self, T: np.ndarray, joint_near: Sequence[float] | None = None) -> np.ndarray:
+    async def inverse_kin(self, T: np.ndarray, joint_near: ArrayLike | None = None) -> np.ndarray:
         near = None if joint_near is None else np.rad2deg(finite_vector(joint_near, 6, "joint_near"))
         reply = await self.request(dobot.inverse_kin(transform_to_dobot_pose(T), near))
         return np.deg2rad(reply.floats())
@@ -474,17 +475,17 @@ class DobotClient:
         return bool(int(reply.floats()[0]))
 
     async def mov_j(
-        self, q: Sequence[float], a: int | None = None, v: int | None = None, cp: int | None = None
+        self, q: ArrayLike, a: int | None = None, v: int | None = None, cp: int | None = None
     ) -> int | None:
-        q = finite_vector(q, 6, "joint target")
-        return (await self.request(dobot.mov_j_joint(np.rad2deg(q), a, v, cp))).result_id
+        q_rad = finite_vector(q, 6, "joint target")
+        return (await self.request(dobot.mov_j_joint(np.rad2deg(q_rad), a, v, cp))).result_id
 
     async def mov_j_pose(self, T: np.ndarray, a: int | None = None, v: int | None = None) -> int | None:
         return (await self.request(dobot.mov_j_pose(transform_to_dobot_pose(T), a, v))).result_id
 
-    async def mov_l(self, q: Sequence[float], a: int | None = None, v: int | None = None) -> int | None:
-        q = finite_vector(q, 6, "joint target")
-        return (await self.request(dobot.mov_l_joint(np.rad2deg(q), a, v))).result_id
+    async def mov_l(self, q: ArrayLike, a: int | None = None, v: int | None = None) -> int | None:
+        q_rad = finite_vector(q, 6, "joint target")
+        return (await self.request(dobot.mov_l_joint(np.rad2deg(q_rad), a, v))).result_id
 
     async def mov_l_pose(
         self, T: np.ndarray, a: int | None = None, v: int | None = None, speed_m_s: float | None = None
@@ -492,27 +493,25 @@ class DobotClient:
         speed = None if speed_m_s is None else max(1, round(speed_m_s * 1000))
         return (await self.request(dobot.mov_l_pose(transform_to_dobot_pose(T), a, v, speed))).result_id
 
-    async def servo_j(self, q: Sequence[float], t_s: float) -> int | None:
-        q = finite_vector(q, 6, "servo target")
-        return (await self.request(dobot.servo_j(np.rad2deg(q), t_s))).result_id
+    async def servo_j(self, q: ArrayLike, t_s: float) -> int | None:
+        q_rad = finite_vector(q, 6, "servo target")
+        return (await self.request(dobot.servo_j(np.rad2deg(q_rad), t_s))).result_id
 
     async def rel_mov_l_tool(
-        self, offset_m_rad: Sequence[float], a: int | None = None, v: int | None = None
+        self, offset_m_rad: ArrayLike, a: int | None = None, v: int | None = None
     ) -> int | None:
         o = finite_vector(offset_m_rad, 6, "offset")
         mm_deg = np.concatenate([o[:3] * 1000.0, np.rad2deg(o[3:])])
         return (await self.request(dobot.rel_mov_l_tool(mm_deg, a, v))).result_id
 
     async def rel_mov_j_tool(
-        self, offset_m_rad: Sequence[float], a: int | None = None, v: int | None = None
+        self, offset_m_rad: ArrayLike, a: int | None = None, v: int | None = None
     ) -> int | None:
         o = finite_vector(offset_m_rad, 6, "offset")
         mm_deg = np.concatenate([o[:3] * 1000.0, np.rad2deg(o[3:])])
         return (await self.request(dobot.rel_mov_j_tool(mm_deg, a, v))).result_id
 
-    async def rel_joint_mov_j(
-        self, dq: Sequence[float], a: int | None = None, v: int | None = None
-    ) -> int | None:
+    async def rel_joint_mov_j(self, dq: ArrayLike, a: int | None = None, v: int | None = None) -> int | None:
         d = finite_vector(dq, 6, "joint offsets")
         return (await self.request(dobot.rel_joint_mov_j(np.rad2deg(d), a, v))).result_id
 

@@ -61,9 +61,10 @@ class DigitalOutputGripper:
             raise GripperError(f"gripper {'close' if close else 'open'} failed: {exc}") from exc
         self._closed = close
         if close and s.object_di is not None:
+            object_bit = s.object_di - 1
             try:
                 await self._client.wait_feedback(
-                    lambda fb: bool((fb.digital_inputs >> (s.object_di - 1)) & 1),  # type: ignore[operator]
+                    lambda fb: bool((fb.digital_inputs >> object_bit) & 1),
                     max(s.actuation_time_s, 0.05),
                 )
             except TimeoutError:

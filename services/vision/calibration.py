@@ -55,15 +55,15 @@ def manual_T_base_camera(
     t = finite_vector(translation_m, 3, "camera translation")
     if np.linalg.norm(t) > 5.0:
         raise InvalidInputError(f"camera translation {t.tolist()} m is more than 5 m from the base: units?")
-    if (rpy_deg is None) == (quat_xyzw is None):
-        raise InvalidInputError("give exactly one of rpy_deg or quat_xyzw for the camera orientation")
-    if rpy_deg is not None:
+    if rpy_deg is not None and quat_xyzw is None:
         R = Rotation.from_euler("xyz", finite_vector(rpy_deg, 3, "camera rpy"), degrees=True).as_matrix()
-    else:
+    elif quat_xyzw is not None and rpy_deg is None:
         q = finite_vector(quat_xyzw, 4, "camera quaternion")
         if abs(np.linalg.norm(q) - 1.0) > 1e-3:
             raise InvalidInputError(f"camera quaternion must be unit length, |q| = {np.linalg.norm(q):.4f}")
         R = Rotation.from_quat(q).as_matrix()
+    else:
+        raise InvalidInputError("give exactly one of rpy_deg or quat_xyzw for the camera orientation")
     return check_transform(make_transform(R, t), "T_base_camera")
 
 
@@ -146,6 +146,7 @@ def _closed_form_X(G: list[Array], C: list[Array], backend: str) -> tuple[Array,
         )
     if backend == "opencv":
         G_inv = [invert_transform(g) for g in G]  # eye-to-hand: base→gripper in place of gripper→base
+        # not in every OpenCV build (hand_eye_backends() checks), nor in the stubs of this one
         R, t = cv2.calibrateHandEye(  # type: ignore[attr-defined]
             [g[:3, :3] for g in G_inv],
             [g[:3, 3] for g in G_inv],

@@ -41,7 +41,7 @@ def detections_msg(result: DetectionResult, frame_id: str = "camera") -> vision_
     )
     msg.timings_ms.update({k: float(v) for k, v in result.timings_ms.items()})
     for r in result.rods:
-        m = msg.rods.add(
+        rod = msg.rods.add(
             center_camera=vec3(r.center_cam),
             axis_camera=vec3(r.axis_cam),
             pose_camera=pose(r.center_cam, r.rotation_cam),
@@ -53,28 +53,28 @@ def detections_msg(result: DetectionResult, frame_id: str = "camera") -> vision_
         )
         R_base = r.rotation_base
         if r.center_base is not None and r.axis_base is not None and R_base is not None:
-            m.has_base = True
-            m.center_base.CopyFrom(vec3(r.center_base))
-            m.axis_base.CopyFrom(vec3(r.axis_base))
-            m.pose_base.CopyFrom(pose(r.center_base, R_base))
+            rod.has_base = True
+            rod.center_base.CopyFrom(vec3(r.center_base))
+            rod.axis_base.CopyFrom(vec3(r.axis_base))
+            rod.pose_base.CopyFrom(pose(r.center_base, R_base))
     for c in result.cubes:
-        m = msg.cubes.add(
+        cube = msg.cubes.add(
             centroid_camera=vec3(c.centroid_cam),
             pose_camera=pose(c.centroid_cam, c.rotation_cam),
             color_label=c.color_label,
             n_points=c.n_points,
         )
         if c.centroid_base is not None and c.rotation_base is not None:
-            m.has_base = True
-            m.centroid_base.CopyFrom(vec3(c.centroid_base))
-            m.pose_base.CopyFrom(pose(c.centroid_base, c.rotation_base))
+            cube.has_base = True
+            cube.centroid_base.CopyFrom(vec3(c.centroid_base))
+            cube.pose_base.CopyFrom(pose(c.centroid_base, c.rotation_base))
     for o in result.obstacles:
-        m = msg.obstacles.add(
+        box = msg.obstacles.add(
             camera=vision_pb2.BoxBounds(min=vec3(o.min_cam), max=vec3(o.max_cam)),
             color_label=o.color_label,
             n_points=o.n_points,
         )
         if o.min_base is not None and o.max_base is not None:
-            m.has_base = True
-            m.base.CopyFrom(vision_pb2.BoxBounds(min=vec3(o.min_base), max=vec3(o.max_base)))
+            box.has_base = True
+            box.base.CopyFrom(vision_pb2.BoxBounds(min=vec3(o.min_base), max=vec3(o.max_base)))
     return msg

@@ -19,7 +19,7 @@ from services.common.sensors import RGBDFrame
 from services.common.settings import VisionSettings
 from services.vision.cubes import detect_cubes_and_obstacles
 from services.vision.geometry import Plane, backproject, fit_plane_ransac, scaled_stride
-from services.vision.results import DetectionResult, RodDetection
+from services.vision.results import CubeDetection, DetectionResult, ObstacleBox, RodDetection
 from services.vision.rod import detect_rods, heights_at
 
 Array = np.ndarray
@@ -110,7 +110,8 @@ class VisionPipeline:
             if T is not None:
                 rods = [r.in_base(T) for r in rods]
 
-        cubes, obstacles = [], []
+        cubes: list[CubeDetection] = []
+        obstacles: list[ObstacleBox] = []
         if s.detect_cubes:
             exclude = _rod_footprint(rods, frame, depth_m, plane) if rods else None
             cubes, obstacles, cube_notes, cube_t = detect_cubes_and_obstacles(

@@ -107,7 +107,7 @@ def detect_rods(
             cand = dark & (((heights > thr) & (heights < h_max)) | ~valid)
     else:
         cand = dark
-    mask = cand.astype(np.uint8)
+    mask: np.ndarray = cand.astype(np.uint8)
     if dark_table:  # isolated noisy pixels of a dark mat stand above the table too
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
     mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5)))

@@ -15,7 +15,9 @@ maps camera points to base points (camera z forward, x right, y down).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from typing import TypeVar
 
 import cv2
 import numpy as np
@@ -94,6 +96,9 @@ class BoxSpec:
         half = np.asarray(self.size) / 2.0
         signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
         return (yaw_matrix(self.yaw) @ (signs * half).T).T + np.asarray(self.center)
+
+
+_Spec = TypeVar("_Spec", RodSpec, BoxSpec)  # what scene placement puts on the table
 
 
 @dataclass(frozen=True)
@@ -288,8 +293,8 @@ def render_scene(scene: SyntheticScene, noise: NoiseModel | None = None, seed: i
         rs, cs = _roi(corners, T_camera_base, intr)
         d_local = rays[rs, cs] @ Rw  # R^T d for row vectors
         o_local = Rw.T @ (origin - center)
-        if kind == "rod":
-            t, n_local = _hit_cylinder(o_local, d_local, spec.length_m, spec.radius_m)  # type: ignore[union-attr]
+        if isinstance(spec, RodSpec):
+            t, n_local = _hit_cylinder(o_local, d_local, spec.length_m, spec.radius_m)
         else:
             t, n_local = _hit_box(o_local, d_local, half_ext)
         visible_alone[obj_id] = int(np.count_nonzero(t < table_depth[rs, cs]))
@@ -451,28 +456,31 @@ def _place_objects(
         m = ranges.margin_px
         return bool(np.all((u >= m) & (u <= intr.width - m) & (v >= m) & (v <= intr.height - m)))
 
-    def try_place(radius: float, make: object, tries: int = 60) -> bool:
+    def try_place(
+        radius: float, make: Callable[[Array], tuple[_Spec, Array]], tries: int = 60
+    ) -> _Spec | None:
         for _ in range(tries):
             xy = target[:2] + rng.uniform(-spread, spread, 2) * np.array([0.8, 1.0])
             if any(np.linalg.norm(xy - q) < radius + rq + 0.04 for q, rq in placed):
                 continue
-            spec, corners = make(xy)  # type: ignore[operator]
+            spec, corners = make(xy)
             if in_view(corners):
                 placed.append((xy, radius))
-                return spec  # type: ignore[no-any-return]
-        return False
+                return spec
+        return None
 
     if obstacle:
-        size = tuple(rng.uniform(lo, hi) for lo, hi in ranges.obstacle_size_m)
+        (sx, sx_hi), (sy, sy_hi), (sz, sz_hi) = ranges.obstacle_size_m
+        size = (rng.uniform(sx, sx_hi), rng.uniform(sy, sy_hi), rng.uniform(sz, sz_hi))
 
         def make_obstacle(xy: Array) -> tuple[BoxSpec, Array]:
-            b = BoxSpec((xy[0], xy[1], size[2] / 2), size, rng.uniform(-np.pi, np.pi), "blue")  # type: ignore[arg-type]
+            b = BoxSpec((xy[0], xy[1], size[2] / 2), size, rng.uniform(-np.pi, np.pi), "blue")
             return b, b.corners()
 
-        spec = try_place(0.5 * float(np.hypot(size[0], size[1])), make_obstacle)
-        if not spec:
+        obstacle_box = try_place(0.5 * float(np.hypot(size[0], size[1])), make_obstacle)
+        if obstacle_box is None:
             return None
-        boxes.append(spec)  # type: ignore[arg-type]
+        boxes.append(obstacle_box)
         obstacle_idx = (0,)
     for _ in range(n_rods):
 
@@ -482,10 +490,10 @@ def _place_objects(
             corners = np.concatenate([ends + [0, 0, rod_radius], ends - [0, 0, rod_radius]])
             return r, corners
 
-        spec = try_place(rod_length / 2, make_rod)
-        if not spec:
+        rod = try_place(rod_length / 2, make_rod)
+        if rod is None:
             return None
-        rods.append(spec)  # type: ignore[arg-type]
+        rods.append(rod)
     s = ranges.cube_size_m
     for colour in cube_colors:
 
@@ -493,10 +501,10 @@ def _place_objects(
             b = BoxSpec((xy[0], xy[1], s / 2), (s, s, s), rng.uniform(-np.pi, np.pi), colour)
             return b, b.corners()
 
-        spec = try_place(s * 0.75, make_cube)
-        if not spec:
+        cube = try_place(s * 0.75, make_cube)
+        if cube is None:
             return None
-        boxes.append(spec)  # type: ignore[arg-type]
+        boxes.append(cube)
     return SyntheticScene(
         T_base_camera=T_base_camera,
         intrinsics=intr,

@@ -79,7 +79,9 @@ def _plate_mesh(size_m: tuple[float, float], T_gripper_board: Array) -> tuple[Ar
     center = corners.mean(axis=0)
     # Each face: 4 corner indices in cyclic order (index = x_bit + 2·y_bit + 4·z_bit).
     faces = [(0, 1, 3, 2), (4, 5, 7, 6), (0, 1, 5, 4), (2, 3, 7, 6), (0, 2, 6, 4), (1, 3, 7, 5)]
-    verts, uvs, tris = [], [], []
+    verts: list[Array] = []
+    uvs: list[tuple[float, float]] = []
+    tris: list[tuple[int, int, int]] = []
     for face in faces:
         base = len(verts)
         for k in face:

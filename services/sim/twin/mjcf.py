@@ -272,7 +272,7 @@ def _add_arm(world: ET.Element, spec: RobotSpec, gripper: GripperSettings) -> No
         jattrs = {"name": spec.joint_names[i], "axis": "0 0 1", "armature": _f(ARMATURE[i])}
         if hi - lo < 1e8:
             jattrs["range"] = _f(lo, hi)
-        ET.SubElement(body, "joint", **jattrs)
+        ET.SubElement(body, "joint", jattrs)
         r = LINK_RADIUS[i]
         a, d = spec.a[i], spec.d[i]
         start = np.zeros(3)
