@@ -13,7 +13,6 @@ import contextlib
 import logging
 from typing import Any
 
-import grpc
 import numpy as np
 
 from services.common.bus import Bus
@@ -53,7 +52,6 @@ class Cell:
         self.robot: RobotService | None = None
         self.vision: VisionService | None = None
         self.task: TaskService | None = None
-        self._servers: list[grpc.aio.Server] = []
         self._stack = contextlib.AsyncExitStack()
 
     # ------------------------------------------------------------------ lifecycle
@@ -69,9 +67,8 @@ class Cell:
         await self._stack.aclose()
 
     async def _start(self) -> None:
-        from services.grasp.service import build_server as build_grasp
-        from services.motion.service import MotionPlannerServicer
-        from services.motion.service import build_server as build_motion
+        from services.grasp.service import GraspService
+        from services.motion.service import MotionService
 
         s = with_updates(self.settings, sim={"seed": self.seed, "engine": self.engine_name})
         self.sim = build_sim_server(s, self.engine_name)
@@ -88,15 +85,10 @@ class Cell:
         self.robot = RobotService(s, self.bus)
         await self._stack.enter_async_context(self.robot)
         await self.robot.driver.enable()
-        motion = MotionPlannerServicer(s)
-        motion_server, motion_port = build_motion(s, s.grpc.motion_port, motion)
-        self._motion = motion
+        motion = await self._stack.enter_async_context(MotionService(s, self.bus, s.grpc.motion_port))
+        grasp = await self._stack.enter_async_context(GraspService(s, s.grpc.grasp_port))
+        motion_port, grasp_port = motion.grpc_port, grasp.grpc_port
         await self._stack.enter_async_context(LiveConfig(self.bus, s, self._on_config))
-        grasp_server, grasp_port = build_grasp(s, s.grpc.grasp_port)
-        for server in (motion_server, grasp_server):
-            await server.start()
-            self._servers.append(server)
-        self._stack.push_async_callback(self._stop_servers)
         camera = self._camera()
         self._stack.push_async_callback(self._close_camera)  # after the vision service has stopped
         self.vision = VisionService(
@@ -128,9 +120,8 @@ class Cell:
         )
 
     async def _on_config(self, new: Settings, changed: list[str]) -> None:
-        """PUT /config for the parts of the cell this object holds: the motion planner's settings at
-        once, the twin's scene layout from the next scene."""
-        await self._motion.on_config(new, changed)
+        """PUT /config for the part of the cell this object holds: the twin's scene layout from the next
+        scene (each service follows its own settings)."""
         if any(c.startswith("sim.twin.") for c in changed):
             self.settings = with_twin(self.settings, new)
 
@@ -138,10 +129,6 @@ class Cell:
         cam = self.vision.camera if self.vision is not None else None
         if cam is not None:
             await asyncio.to_thread(cam.close)
-
-    async def _stop_servers(self) -> None:
-        for server in self._servers:
-            await server.stop(grace=0.2)
 
     # ------------------------------------------------------------------ twin specifics
     @property

@@ -35,18 +35,11 @@ async def check_health(settings: Settings, service: str, timeout_s: float = 3.0)
             await w.wait_closed()
         return f"sim-dobot dashboard {host}:{port} accepts connections"
     if service in GRPC_SERVICES:
-        import grpc
+        from services.common.grpc_util import check_health as grpc_health
 
         host = _dial_host(settings.grpc.client_host(service))  # type: ignore[arg-type]
         port = getattr(settings.grpc, f"{service}_port")
-        async with grpc.aio.insecure_channel(f"{host}:{port}") as ch:
-            try:
-                await asyncio.wait_for(ch.channel_ready(), timeout_s)
-            except TimeoutError as exc:
-                raise RobotCommunicationError(
-                    f"{service} gRPC {host}:{port} not ready within {timeout_s} s"
-                ) from exc
-        return f"{service} gRPC {host}:{port} ready"
+        return await grpc_health(host, port, service, timeout_s)  # the shell's state and its links
     if service == "gateway":
         url = f"http://{_dial_host(settings.gateway.host)}:{settings.gateway.port}/api/v1/system/status"
 

@@ -10,10 +10,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import enum
 import logging
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
-from typing import Any, TypeVar
+from typing import Any, Protocol, TypeVar
 
 import grpc
 import grpc.aio
@@ -105,14 +106,99 @@ def bind(server: grpc.aio.Server, host: str, port: int) -> int:
     return bound
 
 
-async def serve_until_terminated(server: grpc.aio.Server, what: str, host: str, port: int) -> None:
-    """Start a built server, say where it serves, and run it until cancelled or terminated."""
-    await server.start()
-    log.info("%s serving on %s:%d", what, host, port)
-    try:
-        await server.wait_for_termination()
-    finally:
-        await server.stop(grace=0.5)
+# --- health: the standard grpc.health.v1 check, so any gRPC probe (the launcher's, a Kubernetes grpc
+# probe) asks the shell itself whether it serves, not merely whether its port accepts a connection.
+HEALTH_SERVICE = "grpc.health.v1.Health"
+HEALTH_DETAIL_KEY = "pickplace-health"  # trailing metadata: the shell's state and links, for people
+
+
+class ServingStatus(enum.IntEnum):
+    UNKNOWN = 0
+    SERVING = 1
+    NOT_SERVING = 2
+    SERVICE_UNKNOWN = 3
+
+
+def _health_messages() -> tuple[Any, Any]:
+    """HealthCheckRequest / HealthCheckResponse of grpc/health/v1/health.proto, built from their schema."""
+    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+    F = descriptor_pb2.FieldDescriptorProto
+    fdp = descriptor_pb2.FileDescriptorProto(
+        name="grpc/health/v1/health.proto", package="grpc.health.v1", syntax="proto3"
+    )
+    req = fdp.message_type.add(name="HealthCheckRequest")
+    req.field.add(name="service", number=1, type=F.TYPE_STRING, label=F.LABEL_OPTIONAL)
+    resp = fdp.message_type.add(name="HealthCheckResponse")
+    status = resp.enum_type.add(name="ServingStatus")
+    for st in ServingStatus:
+        status.value.add(name=st.name, number=st.value)
+    resp.field.add(
+        name="status",
+        number=1,
+        type=F.TYPE_ENUM,
+        label=F.LABEL_OPTIONAL,
+        type_name=".grpc.health.v1.HealthCheckResponse.ServingStatus",
+    )
+    pool = descriptor_pool.DescriptorPool()
+    pool.Add(fdp)
+    return (
+        message_factory.GetMessageClass(pool.FindMessageTypeByName("grpc.health.v1.HealthCheckRequest")),
+        message_factory.GetMessageClass(pool.FindMessageTypeByName("grpc.health.v1.HealthCheckResponse")),
+    )
+
+
+HealthCheckRequest, HealthCheckResponse = _health_messages()
+
+
+class HealthReport(Protocol):
+    @property
+    def serving(self) -> bool: ...
+
+    def describe(self) -> str: ...
+
+
+def add_health(server: grpc.aio.Server, report: Callable[[], HealthReport]) -> None:
+    """Answer ``grpc.health.v1.Health/Check`` on ``server`` from ``report()`` (any service name)."""
+
+    async def check(request: Any, context: grpc.aio.ServicerContext) -> Any:
+        health = report()
+        context.set_trailing_metadata(((HEALTH_DETAIL_KEY, health.describe()),))
+        status = ServingStatus.SERVING if health.serving else ServingStatus.NOT_SERVING
+        return HealthCheckResponse(status=int(status))
+
+    handler = grpc.unary_unary_rpc_method_handler(
+        check,
+        request_deserializer=HealthCheckRequest.FromString,
+        response_serializer=HealthCheckResponse.SerializeToString,
+    )
+    server.add_generic_rpc_handlers(
+        (grpc.method_handlers_generic_handler(HEALTH_SERVICE, {"Check": handler}),)
+    )
+
+
+async def check_health(host: str, port: int, what: str, timeout_s: float = 3.0) -> str:
+    """Ask a pickplace gRPC server whether it serves; what it said, or RobotCommunicationError."""
+    async with channel(host, port) as ch:
+        call = ch.unary_unary(
+            f"/{HEALTH_SERVICE}/Check",
+            request_serializer=HealthCheckRequest.SerializeToString,
+            response_deserializer=HealthCheckResponse.FromString,
+        )(HealthCheckRequest(), timeout=timeout_s, wait_for_ready=True)
+        try:
+            response = await call
+            trailing = await call.trailing_metadata()
+        except grpc.aio.AioRpcError as exc:
+            raise RobotCommunicationError(
+                f"{what} gRPC {host}:{port} not answering its health check: {exc.code().name}"
+            ) from exc
+    detail = (
+        str(trailing[HEALTH_DETAIL_KEY]) if trailing is not None and HEALTH_DETAIL_KEY in trailing else ""
+    )
+    status = ServingStatus(response.status)
+    if status is not ServingStatus.SERVING:
+        raise RobotCommunicationError(f"{what} gRPC {host}:{port} {status.name}: {detail}")
+    return f"{what} gRPC {host}:{port} serving ({detail})"
 
 
 def translate(exc: grpc.RpcError) -> RobotError:

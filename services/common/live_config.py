@@ -62,6 +62,16 @@ class LiveConfig:
         self._task = asyncio.create_task(self._follow(), name="live-config")
         return self
 
+    async def run(self) -> None:
+        """Subscribe and follow until cancelled: ``start`` for a caller's own TaskGroup."""
+        key = CellKeys(self.startup.cell_id).config_updates
+        self._sub = self._bus.subscribe(key, common_pb2.ConfigUpdate, maxsize=8)
+        try:
+            await self._follow()
+        finally:
+            self._sub.close()
+            self._sub = None
+
     async def stop(self) -> None:
         await cancel_and_wait(self._task)
         self._task = None

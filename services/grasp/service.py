@@ -9,6 +9,7 @@ interceptor.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import time
 from collections.abc import Callable
@@ -24,12 +25,14 @@ from services.common import grpc_util
 from services.common.errors import ConfigurationError, InvalidInputError
 from services.common.messages import pose_to_matrix
 from services.common.settings import RodStandSettings, Settings
+from services.common.shell import GrpcShell
 from services.grasp.collision import MotionCollisionCheck, tool_geometry
 from services.grasp.convert import (
     boxes_from_proto,
     grasp_to_proto,
     joints_or,
     plan_to_proto,
+    rod_size,
 )
 from services.grasp.cube import CubeObservation, plan_pick_and_place
 from services.grasp.rod import RodObservation, plan_pick_and_stand
@@ -112,12 +115,8 @@ class GraspPlannerServicer(grasp_pb2_grpc.GraspPlannerServicer):
         def work() -> grasp_pb2.PickPlan:
             t0 = time.perf_counter()
             rod_cfg = self.settings.vision.rod
-            rod = RodObservation.create(
-                list(request.center),
-                list(request.axis),
-                request.length or rod_cfg.length_m,
-                request.diameter or rod_cfg.diameter_m,
-            )
+            length, diameter = rod_size(request, rod_cfg.length_m, rod_cfg.diameter_m)
+            rod = RodObservation.create(list(request.center), list(request.axis), length, diameter)
             q_now = joints_or(request.current_joints, self.home, self.spec.dof, "current_joints")
             check = MotionCollisionCheck.from_settings(self.settings, boxes_from_proto(request.obstacles))
             cfg = self.cfg
@@ -175,18 +174,26 @@ class GraspPlannerServicer(grasp_pb2_grpc.GraspPlannerServicer):
         return await self._run("PlanPickAndPlace", work)
 
 
-def build_server(settings: Settings, port: int | None = None) -> tuple[grpc.aio.Server, int]:
-    """A GraspPlanner gRPC server bound to ``settings.grpc.host`` (not started); returns (server, port).
+class GraspService(GrpcShell):
+    """The GraspPlanner server (stateless: each request carries what it plans for)."""
 
-    ``port``: None = ``settings.grpc.grasp_port``; 0 = any free port.
-    """
-    server = grpc_util.create_server()
-    grasp_pb2_grpc.add_GraspPlannerServicer_to_server(GraspPlannerServicer(settings), server)
-    bound = grpc_util.bind(server, settings.grpc.host, settings.grpc.grasp_port if port is None else port)
-    return server, bound
+    kind = "grasp"
+
+    def __init__(self, settings: Settings, grpc_port: int | None = None):
+        """``grpc_port``: None = ``settings.grpc.grasp_port``; 0 = any free port."""
+        super().__init__(settings.grpc.host, settings.grpc.grasp_port if grpc_port is None else grpc_port)
+        self.settings = settings
+        self.servicer = GraspPlannerServicer(settings)  # a bad safe-home entry fails here, before serving
+
+    async def _start(self, stack: contextlib.AsyncExitStack) -> None:
+        await self._serve_grpc(
+            stack,
+            lambda server: grasp_pb2_grpc.add_GraspPlannerServicer_to_server(self.servicer, server),
+            "GraspPlanner",
+        )
 
 
 async def serve(settings: Settings) -> None:
     """``pickplace serve grasp``: run until cancelled."""
-    server, port = build_server(settings)
-    await grpc_util.serve_until_terminated(server, "grasp service (GraspPlanner)", settings.grpc.host, port)
+    async with GraspService(settings) as svc:
+        await svc.wait()

@@ -8,6 +8,7 @@ pickplace errors and translated to gRPC status codes by the common interceptor.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 from collections.abc import Callable
 from typing import TypeVar
@@ -20,9 +21,9 @@ from prometheus_client import Counter, Histogram
 from services.common import grpc_util
 from services.common.bus import Bus
 from services.common.errors import InvalidInputError
-from services.common.live_config import LiveConfig
 from services.common.messages import pose_to_matrix
 from services.common.settings import MotionSettings, Settings
+from services.common.shell import GrpcShell
 from services.kinematics.collision import AttachedObject, Box, Scene
 from services.kinematics.model import ArmModel, Kinematics, load_arm
 from services.kinematics.robot_models import ROBOTS
@@ -277,26 +278,31 @@ class MotionPlannerServicer(motion_pb2_grpc.MotionPlannerServicer):
         return await self._run("CheckTrajectory", work)
 
 
-# --- server -------------------------------------------------------------------------------------
-def build_server(
-    settings: Settings, port: int | None = None, servicer: MotionPlannerServicer | None = None
-) -> tuple[grpc.aio.Server, int]:
-    """A MotionPlanner gRPC server bound to ``settings.grpc.host`` (not started); returns (server, port).
+# --- the shell ----------------------------------------------------------------------------------
+class MotionService(GrpcShell):
+    """The MotionPlanner server; with a bus it follows PUT /config (planner, budgets, scales)."""
 
-    ``port``: None = ``settings.grpc.motion_port``; 0 = any free port.
-    """
-    server = grpc_util.create_server()
-    motion_pb2_grpc.add_MotionPlannerServicer_to_server(servicer or MotionPlannerServicer(settings), server)
-    bound = grpc_util.bind(server, settings.grpc.host, settings.grpc.motion_port if port is None else port)
-    return server, bound
+    kind = "motion"
+
+    def __init__(self, settings: Settings, bus: Bus | None = None, grpc_port: int | None = None):
+        """``grpc_port``: None = ``settings.grpc.motion_port``; 0 = any free port."""
+        super().__init__(settings.grpc.host, settings.grpc.motion_port if grpc_port is None else grpc_port)
+        self.settings = settings
+        self.bus = bus
+        self.servicer = MotionPlannerServicer(settings)
+
+    async def _start(self, stack: contextlib.AsyncExitStack) -> None:
+        load_arm(self.settings.robot.model, tool_geometry(self.settings))  # fail fast on a bad model/tool
+        await self._serve_grpc(
+            stack,
+            lambda server: motion_pb2_grpc.add_MotionPlannerServicer_to_server(self.servicer, server),
+            "MotionPlanner",
+        )
+        if self.bus is not None:
+            self.follow_config(self.bus, self.settings, self.servicer.on_config)
 
 
 async def serve(settings: Settings) -> None:
     """``pickplace serve motion``: run until cancelled, following PUT /config changes over Zenoh."""
-    load_arm(settings.robot.model, tool_geometry(settings))  # fail fast on a bad model/tool
-    servicer = MotionPlannerServicer(settings)
-    server, port = build_server(settings, servicer=servicer)
-    async with Bus(settings.zenoh) as bus, LiveConfig(bus, settings, servicer.on_config):
-        await grpc_util.serve_until_terminated(
-            server, "motion service (MotionPlanner)", settings.grpc.host, port
-        )
+    async with Bus(settings.zenoh) as bus, MotionService(settings, bus) as svc:
+        await svc.wait()

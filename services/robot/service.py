@@ -10,13 +10,13 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from collections.abc import AsyncIterator
+import time
+from collections.abc import AsyncIterator, Callable, Iterator
 
 import grpc
 import numpy as np
 from pickplace.v1 import common_pb2, robot_pb2, robot_pb2_grpc
 
-from services.common import grpc_util
 from services.common.bus import Bus
 from services.common.errors import InvalidInputError
 from services.common.frames import finite_vector
@@ -24,9 +24,10 @@ from services.common.keys import CellKeys
 from services.common.live_config import LiveConfig
 from services.common.messages import pose_to_matrix
 from services.common.settings import Settings
+from services.common.shell import GrpcShell
 from services.kinematics.robot_models import get_robot
 from services.kinematics.trajectory import JointTrajectory
-from services.robot.client import DobotClient, FeedbackState
+from services.robot.client import ClientState, DobotClient, FeedbackState
 from services.robot.driver import RobotDriver
 from services.robot.messages import joint_state_msg, robot_status_msg
 
@@ -35,6 +36,7 @@ log = logging.getLogger("pickplace.robot.service")
 STREAM_QUEUE = 256
 GUARD_DEBOUNCE_PACKETS = 3  # 24 ms of sustained force change = touch-down
 GUARD_BASELINE_PACKETS = 25  # 0.2 s at the 8 ms feedback period: let the arm settle, average the noise
+FEEDBACK_STALE_TIMEOUTS = 5  # as DobotClient: a stream silent this many feedback timeouts is gone
 
 
 class JointStateHub:
@@ -63,7 +65,7 @@ class JointStateHub:
             q.put_nowait(msg)
 
     @contextlib.contextmanager
-    def subscription(self) -> AsyncIterator[asyncio.Queue[common_pb2.JointState]]:  # type: ignore[misc]
+    def subscription(self) -> Iterator[asyncio.Queue[common_pb2.JointState]]:
         q: asyncio.Queue[common_pb2.JointState] = asyncio.Queue(STREAM_QUEUE)
         self._queues.add(q)
         try:
@@ -77,10 +79,14 @@ class RobotControllerServicer(robot_pb2_grpc.RobotControllerServicer):
         self.driver = driver
         self.hub = hub
 
-    async def GetJointStates(self, request, context):  # type: ignore[no-untyped-def]
+    async def GetJointStates(
+        self, request: robot_pb2.GetJointStatesRequest, context: grpc.aio.ServicerContext
+    ) -> common_pb2.JointState:
         return joint_state_msg(self.driver.feedback, self.driver.spec, self.hub.seq)
 
-    async def GetStatus(self, request, context):  # type: ignore[no-untyped-def]
+    async def GetStatus(
+        self, request: robot_pb2.GetStatusRequest, context: grpc.aio.ServicerContext
+    ) -> robot_pb2.RobotStatus:
         fb = self.driver.client.feedback
         alarms: list[int] = []
         if fb is not None and fb.in_error:
@@ -89,7 +95,9 @@ class RobotControllerServicer(robot_pb2_grpc.RobotControllerServicer):
             fb, self.driver.spec, fb is not None, alarms, self.driver.gripper.state().closed
         )
 
-    async def MoveJoints(self, request, context):  # type: ignore[no-untyped-def]
+    async def MoveJoints(
+        self, request: robot_pb2.MoveJointsRequest, context: grpc.aio.ServicerContext
+    ) -> robot_pb2.MoveResponse:
         q = finite_vector(list(request.positions), self.driver.spec.dof, "positions")
         ratio = int(request.speed_ratio) if request.speed_ratio else None
         res = await self.driver.move_joints(q, ratio, linear=request.linear)
@@ -100,7 +108,9 @@ class RobotControllerServicer(robot_pb2_grpc.RobotControllerServicer):
             final_positions=res.final_q.tolist(),
         )
 
-    async def ExecuteTrajectory(self, request, context):  # type: ignore[no-untyped-def]
+    async def ExecuteTrajectory(
+        self, request: robot_pb2.ExecuteTrajectoryRequest, context: grpc.aio.ServicerContext
+    ) -> robot_pb2.MoveResponse:
         traj = JointTrajectory.from_proto(request.trajectory)
         stop_when = None
         if request.HasField("force_guard") and request.force_guard.force_drop_n > 0:
@@ -122,7 +132,9 @@ class RobotControllerServicer(robot_pb2_grpc.RobotControllerServicer):
         samples = [(await self.driver.client.next_feedback()).tcp_force for _ in range(packets)]
         return np.mean(samples, axis=0)
 
-    async def StreamJointStates(self, request, context):  # type: ignore[no-untyped-def]
+    async def StreamJointStates(
+        self, request: robot_pb2.StreamJointStatesRequest, context: grpc.aio.ServicerContext
+    ) -> AsyncIterator[common_pb2.JointState]:
         min_interval_ns = int(1e9 / request.max_rate_hz) if request.max_rate_hz > 0 else 0
         last_ns = 0
         with self.hub.subscription() as q:
@@ -133,7 +145,9 @@ class RobotControllerServicer(robot_pb2_grpc.RobotControllerServicer):
                 last_ns = msg.header.stamp_ns
                 yield msg
 
-    async def SetGripper(self, request, context):  # type: ignore[no-untyped-def]
+    async def SetGripper(
+        self, request: robot_pb2.SetGripperRequest, context: grpc.aio.ServicerContext
+    ) -> robot_pb2.GripperResponse:
         st = await self.driver.set_gripper(request.close)
         return robot_pb2.GripperResponse(
             success=True,
@@ -142,7 +156,9 @@ class RobotControllerServicer(robot_pb2_grpc.RobotControllerServicer):
             message="closed" if st.closed else "open",
         )
 
-    async def ExecuteGrasp(self, request, context):  # type: ignore[no-untyped-def]
+    async def ExecuteGrasp(
+        self, request: robot_pb2.ExecuteGraspRequest, context: grpc.aio.ServicerContext
+    ) -> robot_pb2.GripperResponse:
         T = pose_to_matrix(request.grasp_pose, "grasp_pose")
         st = await self.driver.execute_grasp(
             T, request.approach_distance or 0.10, request.lift_distance or 0.10, request.speed_scale or 0.3
@@ -154,30 +170,42 @@ class RobotControllerServicer(robot_pb2_grpc.RobotControllerServicer):
             message="grasped and lifted",
         )
 
-    async def Stop(self, request, context):  # type: ignore[no-untyped-def]
+    async def Stop(
+        self, request: robot_pb2.StopRequest, context: grpc.aio.ServicerContext
+    ) -> common_pb2.CommandResponse:
         await self.driver.stop()
         return common_pb2.CommandResponse(success=True, message="stopped")
 
-    async def EmergencyStop(self, request, context):  # type: ignore[no-untyped-def]
+    async def EmergencyStop(
+        self, request: robot_pb2.EmergencyStopRequest, context: grpc.aio.ServicerContext
+    ) -> common_pb2.CommandResponse:
         await self.driver.emergency_stop(release=request.release)
         return common_pb2.CommandResponse(
             success=True, message="e-stop released" if request.release else "e-stop pressed"
         )
 
-    async def ClearError(self, request, context):  # type: ignore[no-untyped-def]
+    async def ClearError(
+        self, request: robot_pb2.ClearErrorRequest, context: grpc.aio.ServicerContext
+    ) -> common_pb2.CommandResponse:
         await self.driver.clear_error()
         return common_pb2.CommandResponse(success=True, message="alarms cleared")
 
-    async def Enable(self, request, context):  # type: ignore[no-untyped-def]
+    async def Enable(
+        self, request: robot_pb2.EnableRequest, context: grpc.aio.ServicerContext
+    ) -> common_pb2.CommandResponse:
         await self.driver.enable()
         return common_pb2.CommandResponse(success=True, message="enabled")
 
-    async def Disable(self, request, context):  # type: ignore[no-untyped-def]
+    async def Disable(
+        self, request: robot_pb2.DisableRequest, context: grpc.aio.ServicerContext
+    ) -> common_pb2.CommandResponse:
         await self.driver.disable()
         return common_pb2.CommandResponse(success=True, message="disabled")
 
 
-def force_drop_condition(baseline_wrench: np.ndarray, drop_n: float, direction: list[float]):  # type: ignore[no-untyped-def]
+def force_drop_condition(
+    baseline_wrench: np.ndarray, drop_n: float, direction: list[float]
+) -> Callable[[FeedbackState], bool]:
     """Stop condition of a guarded move: the force along ``direction`` fell by ``drop_n``."""
     d = finite_vector(direction or [0.0, 0.0, -1.0], 3, "force guard direction")
     norm = float(np.linalg.norm(d))
@@ -214,56 +242,53 @@ def build_driver(settings: Settings) -> RobotDriver:
     return RobotDriver(client, get_robot(r.model), settings, T_flange_tool)
 
 
-class RobotService:
+def robot_link_up(client: DobotClient, feedback_timeout_s: float, now_ns: int) -> bool:
+    """The controller link is up while feedback keeps arriving: the packet stream is the controller's
+    heartbeat (8 ms); the client gives up a silent stream after the same five feedback timeouts."""
+    fb = client.feedback
+    if client.state is ClientState.CLOSED or fb is None:
+        return False
+    return now_ns - fb.received_ns < FEEDBACK_STALE_TIMEOUTS * max(feedback_timeout_s, 0.05) * 1e9
+
+
+class RobotService(GrpcShell):
     """Owns the driver, the gRPC server and the Zenoh publisher for one robot."""
 
+    kind = "robot"
+
     def __init__(self, settings: Settings, bus: Bus | None = None, grpc_port: int | None = None):
+        super().__init__(settings.grpc.host, settings.grpc.robot_port if grpc_port is None else grpc_port)
         self.settings = settings
         self.driver = build_driver(settings)
         self.bus = bus
         self.hub = JointStateHub(self.driver, bus, CellKeys(settings.cell_id))
-        self.server: grpc.aio.Server | None = None
-        self.grpc_port = settings.grpc.robot_port if grpc_port is None else grpc_port
         self.live: LiveConfig | None = None
 
-    async def start(self) -> int:
+    async def _start(self, stack: contextlib.AsyncExitStack) -> None:
+        client = self.driver.client
+        stack.push_async_callback(client.close)
         await self.driver.start()
-        self.driver.client.add_listener(self.hub.on_feedback)
-        self.server = grpc_util.create_server()
-        robot_pb2_grpc.add_RobotControllerServicer_to_server(
-            RobotControllerServicer(self.driver, self.hub), self.server
+        client.add_listener(self.hub.on_feedback)
+        stack.callback(client.remove_listener, self.hub.on_feedback)
+        servicer = RobotControllerServicer(self.driver, self.hub)
+        await self._serve_grpc(
+            stack,
+            lambda server: robot_pb2_grpc.add_RobotControllerServicer_to_server(servicer, server),
+            "RobotController",
         )
-        self.grpc_port = grpc_util.bind(self.server, self.settings.grpc.host, self.grpc_port)
-        await self.server.start()
         if self.bus is not None:
-            self.live = LiveConfig(self.bus, self.settings, self._on_config).start()
-        log.info("robot driver serving RobotController on %s:%d", self.settings.grpc.host, self.grpc_port)
-        return self.grpc_port
+            self.live = self.follow_config(self.bus, self.settings, self._on_config)
+
+    def links(self) -> dict[str, bool]:
+        up = robot_link_up(self.driver.client, self.settings.robot.feedback_timeout_s, time.time_ns())
+        return {"robot controller": up}
 
     async def _on_config(self, new: Settings, changed: list[str]) -> None:
         self.settings = new
         await self.driver.update_settings(new, changed)
 
-    async def stop(self) -> None:
-        if self.live is not None:
-            await self.live.stop()
-            self.live = None
-        if self.server is not None:
-            await self.server.stop(grace=0.5)
-            self.server = None
-        self.driver.client.remove_listener(self.hub.on_feedback)
-        await self.driver.client.close()
-
-    async def __aenter__(self) -> RobotService:
-        await self.start()
-        return self
-
-    async def __aexit__(self, *exc: object) -> None:
-        await self.stop()
-
 
 async def serve(settings: Settings) -> None:
     """``pickplace serve robot``: run until cancelled."""
     async with Bus(settings.zenoh) as bus, RobotService(settings, bus) as svc:
-        assert svc.server is not None
-        await svc.server.wait_for_termination()
+        await svc.wait()

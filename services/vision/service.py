@@ -22,13 +22,12 @@ import logging
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import grpc
 import numpy as np
 from pickplace.v1 import common_pb2, vision_pb2, vision_pb2_grpc
 
-from services.common import grpc_util
-from services.common.aio import cancel_and_wait
 from services.common.bus import Bus
 from services.common.errors import (
     CameraConnectionError,
@@ -46,6 +45,7 @@ from services.common.sensors import (
     msg_to_frame,
 )
 from services.common.settings import REPO_ROOT, CalibrationSettings, CameraSourceSettings, Settings
+from services.common.shell import GrpcShell
 from services.vision.calibration import manual_T_base_camera, read_calibration
 from services.vision.messages import detections_msg
 from services.vision.overlay import overlay_jpeg
@@ -57,6 +57,7 @@ log = logging.getLogger("pickplace.vision.service")
 Array = np.ndarray
 
 FRAME_WAIT_S = 2.0
+CAPTURE_FAILURES_DOWN = 3  # frames missed in a row before health reports the frame source down
 
 
 def load_T_base_camera(cal: CalibrationSettings) -> tuple[Array | None, str]:
@@ -94,7 +95,9 @@ class VisionServicer(vision_pb2_grpc.VisionServicer):
     def __init__(self, service: VisionService):
         self.service = service
 
-    async def Detect(self, request, context):  # type: ignore[no-untyped-def]
+    async def Detect(
+        self, request: vision_pb2.DetectRequest, context: grpc.aio.ServicerContext
+    ) -> vision_pb2.DetectResponse:
         frame = msg_to_frame(request.frame) if request.HasField("frame") else None
         result, used = await self.service.detect_once(frame)
         response = vision_pb2.DetectResponse(objects=detections_msg(result, used.frame_id))
@@ -102,14 +105,18 @@ class VisionServicer(vision_pb2_grpc.VisionServicer):
             response.debug_jpeg = self.service.latest_jpeg or b""
         return response
 
-    async def GetDebugImage(self, request, context):  # type: ignore[no-untyped-def]
+    async def GetDebugImage(
+        self, request: vision_pb2.DebugImageRequest, context: grpc.aio.ServicerContext
+    ) -> vision_pb2.DebugImage:
         if self.service.latest_jpeg is None:
             raise ObjectNotDetectedError("no frame has been processed yet, so there is no debug image")
         return vision_pb2.DebugImage(header=self.service.latest_header, jpeg=self.service.latest_jpeg)
 
 
-class VisionService:
+class VisionService(GrpcShell):
     """Owns the pipeline, the frame source, the gRPC server and the publishing loop."""
+
+    kind = "vision"
 
     def __init__(
         self,
@@ -121,6 +128,7 @@ class VisionService:
         T_base_camera: Array | None = None,
         publish_loop: bool = True,
     ):
+        super().__init__(settings.grpc.host, settings.grpc.vision_port if grpc_port is None else grpc_port)
         self.settings = settings
         self.bus = bus
         self.camera = camera
@@ -133,8 +141,6 @@ class VisionService:
             self.calibration_source = "given"
         else:
             self.T_base_camera, self.calibration_source = load_T_base_camera(settings.vision.calibration)
-        self.grpc_port = settings.grpc.vision_port if grpc_port is None else grpc_port
-        self.server: grpc.aio.Server | None = None
         self.publish_loop = publish_loop
         self.latest_jpeg: bytes | None = None
         self.latest_header = common_pb2.Header()
@@ -142,38 +148,42 @@ class VisionService:
         self.published = 0
         self._bus_frame: RGBDFrame | None = None
         self._bus_frame_event = asyncio.Event()
-        self._subscription: object | None = None
-        self._loop_task: asyncio.Task[None] | None = None
+        self._subscription: Any = None
+        self._capture_failures = 0  # in a row: the frame source is taken as down from CAPTURE_FAILURES_DOWN
         self.live: LiveConfig | None = None
         self._detect_lock = asyncio.Lock()
 
     # --- lifecycle ---------------------------------------------------------------------------------
-    async def start(self) -> int:
+    async def _start(self, stack: contextlib.AsyncExitStack) -> None:
         if self.camera is None:
             self.camera = await asyncio.to_thread(make_camera, self.settings.vision.camera)
             self._owns_camera = self.camera is not None
+            stack.push_async_callback(self._close_own_camera)
         if self.camera is None and self.bus is not None:
             loop = asyncio.get_running_loop()
             self._subscription = self.bus.subscribe_callback(
                 self.keys.camera_frames,
                 lambda _k, payload: loop.call_soon_threadsafe(self._on_bus_frame, payload),
             )
-        self.server = grpc_util.create_server()
-        vision_pb2_grpc.add_VisionServicer_to_server(VisionServicer(self), self.server)
-        self.grpc_port = grpc_util.bind(self.server, self.settings.grpc.host, self.grpc_port)
-        await self.server.start()
+            stack.callback(self._undeclare_subscription)
+        await self._serve_grpc(
+            stack,
+            lambda server: vision_pb2_grpc.add_VisionServicer_to_server(VisionServicer(self), server),
+            "Vision",
+        )
         if self.publish_loop and (self.camera is not None or self._subscription is not None):
-            self._loop_task = asyncio.create_task(self._run(), name="vision.publish")
+            self.spawn(self._run(), "publish")
         if self.bus is not None:
-            self.live = LiveConfig(self.bus, self.settings, self._on_config).start()
+            self.live = self.follow_config(self.bus, self.settings, self._on_config)
         log.info(
-            "vision serving on %s:%d; camera %s; calibration: %s",
-            self.settings.grpc.host,
-            self.grpc_port,
+            "vision camera %s; calibration: %s",
             type(self.camera).__name__ if self.camera else "Zenoh frame stream",
             self.calibration_source,
         )
-        return self.grpc_port
+
+    def links(self) -> dict[str, bool]:
+        has_source = self.camera is not None or self._subscription is not None
+        return {"frame source": has_source and self._capture_failures < CAPTURE_FAILURES_DOWN}
 
     async def _on_config(self, new: Settings, changed: list[str]) -> None:
         """PUT /config: the rate applies from the next frame, the enabled detectors from the next detection."""
@@ -181,29 +191,15 @@ class VisionService:
         if any(c.startswith("vision.") for c in changed):
             self.pipeline.settings = new.vision
 
-    async def stop(self) -> None:
-        if self.live is not None:
-            await self.live.stop()
-            self.live = None
-        await cancel_and_wait(self._loop_task)
-        self._loop_task = None
-        if self.server is not None:
-            await self.server.stop(grace=0.5)
-            self.server = None
-        if self._subscription is not None:
-            with contextlib.suppress(Exception):
-                self._subscription.undeclare()  # type: ignore[attr-defined]
-            self._subscription = None
+    def _undeclare_subscription(self) -> None:
+        with contextlib.suppress(Exception):  # the session may be closing already
+            self._subscription.undeclare()
+        self._subscription = None
+
+    async def _close_own_camera(self) -> None:
         if self._owns_camera and self.camera is not None:
             await asyncio.to_thread(self.camera.close)
             self.camera = None
-
-    async def __aenter__(self) -> VisionService:
-        await self.start()
-        return self
-
-    async def __aexit__(self, *exc: object) -> None:
-        await self.stop()
 
     # --- frames ------------------------------------------------------------------------------------
     def _on_bus_frame(self, payload: bytes) -> None:
@@ -217,9 +213,17 @@ class VisionService:
     async def _next_frame(self) -> tuple[RGBDFrame, float]:
         """The newest frame and how long getting it took (s)."""
         t0 = time.perf_counter()
+        try:
+            frame = await self._capture()
+        except CameraConnectionError:
+            self._capture_failures += 1
+            raise
+        self._capture_failures = 0
+        return frame, time.perf_counter() - t0
+
+    async def _capture(self) -> RGBDFrame:
         if self.camera is not None:
-            frame = await asyncio.to_thread(self.camera.capture)
-            return frame, time.perf_counter() - t0
+            return await asyncio.to_thread(self.camera.capture)
         if self._subscription is None:
             raise CameraConnectionError("the vision service has no camera and no frame stream")
         self._bus_frame_event.clear()
@@ -231,7 +235,7 @@ class VisionService:
                 f"no camera frame on {self.keys.camera_frames} within {FRAME_WAIT_S} s"
             ) from exc
         assert self._bus_frame is not None
-        return self._bus_frame, time.perf_counter() - t0
+        return self._bus_frame
 
     # --- detection -----------------------------------------------------------------------------------
     async def detect_once(self, frame: RGBDFrame | None = None) -> tuple[DetectionResult, RGBDFrame]:
@@ -341,5 +345,4 @@ class BusCamera:
 async def serve(settings: Settings, camera: Camera | None = None) -> None:
     """``pickplace serve vision``: run until cancelled."""
     async with Bus(settings.zenoh) as bus, VisionService(settings, bus, camera) as svc:
-        assert svc.server is not None
-        await svc.server.wait_for_termination()
+        await svc.wait()

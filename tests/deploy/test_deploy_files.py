@@ -245,16 +245,12 @@ def run_probe(service: str, env: dict[str, str]) -> subprocess.CompletedProcess[
 async def test_the_health_probe_passes_on_a_serving_service_and_fails_without_one():
     import asyncio
 
-    from services.motion.service import build_server
+    from services.motion.service import MotionService
 
     port = free_port()
     s = load_settings("sim", overrides={"grpc": {"motion_port": port}})
-    server, bound = build_server(s)
-    await server.start()
-    try:
-        ok = await asyncio.to_thread(run_probe, "motion", {"PICKPLACE_GRPC__MOTION_PORT": str(bound)})
-    finally:
-        await server.stop(0)
+    async with MotionService(s) as svc:
+        ok = await asyncio.to_thread(run_probe, "motion", {"PICKPLACE_GRPC__MOTION_PORT": str(svc.grpc_port)})
     bad = await asyncio.to_thread(run_probe, "motion", {"PICKPLACE_GRPC__MOTION_PORT": str(free_port())})
     assert ok.returncode == 0, ok.stderr
     assert bad.returncode == 1 and "unhealthy" in bad.stderr and "motion" in bad.stderr

@@ -13,7 +13,7 @@ from services.common.grpc_util import channel, rpc_errors
 from services.common.messages import matrix_to_pose, pose_to_matrix
 from services.common.settings import Settings, load_settings
 from services.grasp.geometry import pose, rotation_z
-from services.grasp.service import GraspPlannerServicer, build_server
+from services.grasp.service import GraspPlannerServicer, GraspService
 
 pytestmark = pytest.mark.integration
 
@@ -24,13 +24,8 @@ def grasp_settings() -> Settings:
 
 @pytest.fixture
 async def stub() -> AsyncIterator[grasp_pb2_grpc.GraspPlannerStub]:
-    server, port = build_server(grasp_settings(), port=0)
-    await server.start()
-    try:
-        async with channel("127.0.0.1", port) as ch:
-            yield grasp_pb2_grpc.GraspPlannerStub(ch)
-    finally:
-        await server.stop(grace=None)
+    async with GraspService(grasp_settings(), grpc_port=0) as svc, channel("127.0.0.1", svc.grpc_port) as ch:
+        yield grasp_pb2_grpc.GraspPlannerStub(ch)
 
 
 async def test_compute_grasps_for_a_lying_cylinder(stub) -> None:  # type: ignore[no-untyped-def]

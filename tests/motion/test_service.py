@@ -16,7 +16,7 @@ from services.common.messages import matrix_to_pose, pose_to_matrix
 from services.kinematics.model import Kinematics, load_arm
 from services.kinematics.trajectory import JointLimits, JointTrajectory, verify_trajectory
 from services.kinematics.urdf import tool_geometry
-from services.motion.service import build_server
+from services.motion.service import MotionService
 
 pytestmark = pytest.mark.integration
 
@@ -30,13 +30,11 @@ WALL = motion_pb2.CollisionBox(
 
 @pytest.fixture
 async def stub(settings):
-    server, port = build_server(settings, 0)
-    await server.start()
-    try:
-        async with grpc_util.channel("127.0.0.1", port) as ch:
-            yield motion_pb2_grpc.MotionPlannerStub(ch)
-    finally:
-        await server.stop(0)
+    async with (
+        MotionService(settings, grpc_port=0) as svc,
+        grpc_util.channel("127.0.0.1", svc.grpc_port) as ch,
+    ):
+        yield motion_pb2_grpc.MotionPlannerStub(ch)
 
 
 @pytest.fixture

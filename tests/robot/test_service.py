@@ -10,10 +10,10 @@ import pytest
 from pickplace.v1 import common_pb2, robot_pb2, robot_pb2_grpc
 
 from services.common.bus import Bus
-from services.common.errors import InvalidInputError, LimitViolationError
-from services.common.grpc_util import channel, rpc_errors
+from services.common.errors import InvalidInputError, LimitViolationError, RobotCommunicationError
+from services.common.grpc_util import channel, check_health, rpc_errors
 from services.common.keys import CellKeys
-from services.robot.service import RobotService
+from services.robot.service import RobotService, robot_link_up
 from tests.conftest import free_port
 
 pytestmark = pytest.mark.integration
@@ -145,3 +145,16 @@ async def test_execute_grasp_lld_13_2(stub, service):
         await stub.ExecuteGrasp(robot_pb2.ExecuteGraspRequest(grasp_pose=matrix_to_pose(T_low)))
     assert "LimitViolationError" in err.value.details() or "IKFailureError" in err.value.details()
     assert np.allclose(drv.joint_positions(), q_before, atol=1e-6)
+
+
+async def test_health_follows_the_robot_link(service):
+    said = await check_health("127.0.0.1", service.grpc_port, "robot")
+    assert "running, robot controller up" in said
+    client = service.driver.client
+    # a feedback stream silent for five feedback timeouts is a link that is down
+    fb = client.feedback
+    assert robot_link_up(client, 0.2, fb.received_ns + 900_000_000)
+    assert not robot_link_up(client, 0.2, fb.received_ns + 1_100_000_000)
+    await client.close()  # the link goes down under the running service
+    with pytest.raises(RobotCommunicationError, match="NOT_SERVING: running, robot controller DOWN"):
+        await check_health("127.0.0.1", service.grpc_port, "robot")
