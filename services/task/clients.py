@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 from pickplace.v1 import (
     grasp_pb2,
@@ -17,12 +19,14 @@ from pickplace.v1 import (
 from services.common.errors import (
     CameraConnectionError,
     EmergencyStopError,
+    PlanningError,
     RobotCommunicationError,
     VisionError,
 )
 from services.common.frames import make_transform
 from services.common.grpc_util import channel, rpc_errors
 from services.common.messages import matrix_to_pose, pose_to_matrix
+from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.common.settings import Settings
 from services.kinematics import analytic
 from services.kinematics.robot_models import get_robot
@@ -30,6 +34,7 @@ from services.kinematics.trajectory import JointTrajectory
 from services.task.ports import (
     GraspPlan,
     GripOutcome,
+    Move,
     MoveOutcome,
     Observation,
     PlannedWaypoint,
@@ -108,24 +113,33 @@ class GrpcVision:
         return Observation(rods, cubes, boxes, tuple(objs.notes), float(objs.timings_ms.get("total", 0.0)))
 
 
+MOTION_KIND = {
+    grasp_pb2.PickWaypoint.JOINT: MotionKind.JOINT,
+    grasp_pb2.PickWaypoint.MOTION_UNSPECIFIED: MotionKind.JOINT,
+    grasp_pb2.PickWaypoint.LINEAR: MotionKind.LINEAR,
+    grasp_pb2.PickWaypoint.HOLD: MotionKind.HOLD,
+}
+GRIPPER_COMMAND = {
+    grasp_pb2.PickWaypoint.OPEN: GripperCommand.OPEN,
+    grasp_pb2.PickWaypoint.CLOSE: GripperCommand.CLOSE,
+}
+MOTION_TYPE = {
+    MotionKind.JOINT: motion_pb2.MotionWaypoint.JOINT,
+    MotionKind.LINEAR: motion_pb2.MotionWaypoint.LINEAR,
+}
+
+
 def _waypoints(plan: grasp_pb2.PickPlan) -> list[PlannedWaypoint]:
-    motion = {
-        grasp_pb2.PickWaypoint.JOINT: "joint",
-        grasp_pb2.PickWaypoint.MOTION_UNSPECIFIED: "joint",
-        grasp_pb2.PickWaypoint.LINEAR: "linear",
-        grasp_pb2.PickWaypoint.HOLD: "hold",
-    }
-    gripper = {grasp_pb2.PickWaypoint.OPEN: "open", grasp_pb2.PickWaypoint.CLOSE: "close"}
     out = []
     for w in plan.waypoints:
         guarded = w.HasField("guard") and w.guard.force_drop_n > 0
         out.append(
             PlannedWaypoint(
                 name=w.name,
-                motion=motion[w.motion],
+                motion=MOTION_KIND[w.motion],
                 T_base_tool=pose_to_matrix(w.pose),
                 joints=np.array(w.joints),
-                gripper=gripper.get(w.gripper),
+                gripper=GRIPPER_COMMAND.get(w.gripper),
                 guard_force_n=w.guard.force_drop_n if guarded else 0.0,
                 guard_overtravel_m=w.guard.overtravel_m if guarded else 0.0,
                 guard_speed_m_s=w.guard.speed_m_s if guarded else 0.0,
@@ -144,7 +158,7 @@ class GrpcGrasp:
 
     def _plan(self, plan: grasp_pb2.PickPlan) -> GraspPlan:
         return GraspPlan(
-            plan.task,
+            TaskKind(plan.task),
             _waypoints(plan),
             plan.grasp.quality,
             plan.held_object if plan.HasField("held_object") else None,
@@ -164,8 +178,8 @@ class GrpcGrasp:
         req = grasp_pb2.PickAndStandRequest(
             center=rod.center.tolist(),
             axis=rod.axis.tolist(),
-            length=0.0,
-            diameter=0.0,
+            length=rod.length,  # as measured; the grasp service refuses a size that is not positive
+            diameter=rod.diameter,
             current_joints=q_now.tolist(),
             obstacles=boxes_msg(obstacles),
             alternative=alternative,
@@ -223,38 +237,31 @@ class GrpcMotion:
             )
         return None
 
-    async def plan_joint(
-        self, start: np.ndarray, goal: np.ndarray, obstacles: tuple[SeenBox, ...], held: object | None
-    ) -> JointTrajectory:
-        req = motion_pb2.PlanJointsRequest(
-            start=start.tolist(),
-            goal=goal.tolist(),
-            scene=self._scene(obstacles, held),
-            options=self._options(held),
-        )
+    async def plan_moves(
+        self, start: np.ndarray, moves: Sequence[Move], obstacles: tuple[SeenBox, ...]
+    ) -> list[JointTrajectory | None]:
+        """One PlanWaypoints request; a move carrying the object (or slowed) has its own scene/options."""
+        if not moves:
+            return []
+        req = motion_pb2.PlanWaypointsRequest(start=start.tolist(), scene=self._scene(obstacles, None))
+        for m in moves:
+            wp = motion_pb2.MotionWaypoint(motion=MOTION_TYPE[m.kind], label=m.label)
+            if m.kind is MotionKind.JOINT:
+                wp.joints.extend(m.target.tolist())
+            else:
+                wp.pose.CopyFrom(matrix_to_pose(m.target))
+            if m.held is not None:
+                wp.scene.CopyFrom(self._scene(obstacles, m.held, m.table_contact))
+            opts = self._options(m.held, m.slow)
+            if opts is not None:
+                wp.options.CopyFrom(opts)
+            req.waypoints.append(wp)
         with rpc_errors():
-            resp = await self._stub.PlanJoints(req, timeout=self._timeout)
-        return JointTrajectory.from_proto(resp.trajectory)
-
-    async def plan_linear(
-        self,
-        start: np.ndarray,
-        T_goal: np.ndarray,
-        obstacles: tuple[SeenBox, ...],
-        held: object | None,
-        slow: bool = False,
-        table_contact: bool = False,
-    ) -> JointTrajectory:
-        opts = self._options(held, slow)
-        req = motion_pb2.PlanCartesianRequest(
-            start=start.tolist(),
-            poses=[matrix_to_pose(T_goal)],
-            scene=self._scene(obstacles, held, table_contact),
-            options=opts,
-        )
-        with rpc_errors():
-            resp = await self._stub.PlanCartesian(req, timeout=self._timeout)
-        return JointTrajectory.from_proto(resp.trajectory)
+            resp = await self._stub.PlanWaypoints(req, timeout=self._timeout)
+        segments = [JointTrajectory.from_proto(s) for s in resp.segments]
+        if len(segments) != len(moves):
+            raise PlanningError(f"the motion service planned {len(segments)} of {len(moves)} moves")
+        return [s if len(s) > 1 else None for s in segments]  # one point: already there
 
     async def tool_pose(self, q: np.ndarray) -> np.ndarray:
         return analytic.fk(self._spec, q, self._T_flange_tool)

@@ -4,8 +4,12 @@ RELEASE → DONE, with DETECT_FAILED → RETRY → ABORT and the recovery of LLD
 The orchestrator only awaits its ports (never blocks the event loop), runs every state
 under a deadline, times each stage, and resumes from the failed step: a failed
 detection looks again, an unplannable grasp tries the next option, a robot alarm is
-cleared and the rest is replanned from where the arm stands, a grasp that did not
-hold is retried with an adjusted grasp, and a safety stop hands over to the operator.
+cleared and the rest is replanned from where the arm stands (the object still in the
+gripper if it was carried), a grasp that did not hold is retried with an adjusted grasp,
+and a safety stop hands over to the operator.
+
+Its waits and its clock are injected (``wait``, ``clock``): the service uses asyncio.sleep
+and the wall clock, tests a recorder and the fake controller's time.
 """
 
 from __future__ import annotations
@@ -14,7 +18,7 @@ import asyncio
 import logging
 import time
 import uuid
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -27,6 +31,7 @@ from services.common.errors import (
     SafetyError,
 )
 from services.common.frames import matrix_to_quat_xyzw
+from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.kinematics.trajectory import JointTrajectory
 from services.task.placement import free_place_xy, place_candidates
 from services.task.plan import state_for
@@ -34,7 +39,9 @@ from services.task.ports import (
     GraspPlan,
     GraspPort,
     MotionPort,
+    Move,
     Observation,
+    PlannedWaypoint,
     RobotPort,
     SeenBox,
     SeenRod,
@@ -46,6 +53,7 @@ from services.task.states import CycleState, PickOutcome, StateDeadlines
 log = logging.getLogger("pickplace.task.cycle")
 
 StateListener = Callable[[CycleState, str], None]
+Wait = Callable[[float], Awaitable[None]]
 RESUME_TOLERANCE_RAD = np.deg2rad(0.5)
 OBJECT_MARGIN_M = 0.0  # the motion scene pads every box already (motion.padding_m)
 
@@ -68,6 +76,23 @@ class CycleAborted(Exception):
     """The cycle gave up; the outcome says why."""
 
 
+@dataclass
+class PlannedPick:
+    """A grasp plan with a trajectory per waypoint (None: no motion) and the scene it was planned in."""
+
+    plan: GraspPlan
+    trajs: list[JointTrajectory | None]
+    obstacles: tuple[SeenBox, ...]
+
+
+@dataclass(frozen=True)
+class Progress:
+    """How far execution got: the waypoint under way, and whether the arm had reached it."""
+
+    index: int = 0
+    reached: bool = False
+
+
 class Orchestrator:
     def __init__(
         self,
@@ -77,17 +102,22 @@ class Orchestrator:
         robot: RobotPort,
         config: CycleConfig | None = None,
         on_state: StateListener | None = None,
+        wait: Wait = asyncio.sleep,
+        clock: Callable[[], float] = time.perf_counter,
     ):
         self.vision, self.grasp, self.motion, self.robot = vision, grasp, motion, robot
         self.config = config or CycleConfig()
         self._on_state = on_state
+        self._wait = wait  # between detection retries
+        self._clock = clock  # stage and cycle durations
         self.state = CycleState.IDLE
         self._outcome: PickOutcome | None = None
         self._stage_t0 = 0.0
+        self._progress = Progress()
 
     # ------------------------------------------------------------------ bookkeeping
     def _enter(self, state: CycleState, message: str = "") -> None:
-        now = time.perf_counter()
+        now = self._clock()
         out = self._outcome
         if out is not None and self.state not in (CycleState.IDLE,):
             key = self.state.value
@@ -114,11 +144,10 @@ class Orchestrator:
             raise RobotError(f"{what} did not finish within its {seconds:.0f} s deadline") from None
 
     # ------------------------------------------------------------------ the cycle
-    async def run(self, task: str = "stand-rod") -> PickOutcome:
-        t0 = time.perf_counter()
-        out = PickOutcome(
-            pick_id=uuid.uuid4().hex, task=task, object_class="rod" if task == "stand-rod" else "cube"
-        )
+    async def run(self, task: TaskKind | str = TaskKind.STAND_ROD) -> PickOutcome:
+        task = TaskKind(task)
+        t0 = self._clock()
+        out = PickOutcome(pick_id=uuid.uuid4().hex, task=task, object_class=task.object_class)
         self._outcome = out
         attempts = Attempts()
         self._enter(CycleState.INIT)
@@ -140,21 +169,28 @@ class Orchestrator:
             raise
         finally:
             out.attempts = attempts.total
-            out.cycle_time_s = time.perf_counter() - t0
+            out.cycle_time_s = self._clock() - t0
             self._outcome = None
         return out
 
-    async def _cycle(self, task: str, out: PickOutcome, attempts: Attempts) -> None:
+    async def _cycle(self, task: TaskKind, out: PickOutcome, attempts: Attempts) -> None:
         while True:  # each pass: detect → plan → execute; recovery loops back here
             obs = await self._detect(out, attempts)
-            plan, trajs = await self._plan(task, obs, out, attempts)
-            if plan is None:
-                continue  # re-detect (planning asked for it)
-            try:
-                await self._execute(plan, trajs, obs)
-                self._enter(CycleState.DONE, "returning to safe home")
-                await self._return_home(plan, obs)
+            planned = await self._plan(task, obs, out, attempts)
+            if await self._carry_out(planned, obs, out, attempts):
                 return
+
+    async def _carry_out(
+        self, planned: PlannedPick, obs: Observation, out: PickOutcome, attempts: Attempts
+    ) -> bool:
+        """Execute the plan, resuming it after cleared alarms; False: detect and plan again."""
+        self._progress = Progress()
+        while True:
+            try:
+                await self._execute(planned, self._progress)
+                self._enter(CycleState.DONE, "returning to safe home")
+                await self._return_home(planned.plan, obs)
+                return True
             except SafetyError:
                 raise
             except RobotError as exc:
@@ -167,9 +203,15 @@ class Orchestrator:
                     await self._leave_safe()
                     raise CycleAborted(f"{self.state.value}: {exc}") from exc
                 await self.robot.recover()
+                if action is Action.CLEAR_AND_RESUME:
+                    # the scene is as planned (the object in the gripper if it was carried): go on from
+                    # the failed waypoint, its motion replanned from where the arm stands
+                    w = planned.plan.waypoints[self._progress.index]
+                    self._enter(state_for(w.name), f"resuming at {w.name} after {type(exc).__name__}")
+                    continue
                 if action is Action.REGRASP:
                     await self._back_off_open()
-                # CLEAR_AND_RESUME / REGRASP / NEXT_GRASP: detect again and plan from where the arm is
+                return False  # REGRASP / NEXT_GRASP: detect again and plan from where the arm is
 
     # ------------------------------------------------------------------ DETECT
     async def _detect(self, out: PickOutcome, attempts: Attempts) -> Observation:
@@ -177,11 +219,11 @@ class Orchestrator:
             self._enter(CycleState.DETECT)
             try:
                 obs = await self._timed(self.vision.observe(), self.config.deadlines.detect_s, "detection")
-                if out.task == "stand-rod" and not obs.rods:
+                if out.task is TaskKind.STAND_ROD and not obs.rods:
                     raise ObjectNotDetectedError(
                         "no rod detected: " + ("; ".join(obs.notes) or "empty table")
                     )
-                if out.task == "sort-cubes" and not obs.cubes:
+                if out.task is TaskKind.SORT_CUBES and not obs.cubes:
                     raise ObjectNotDetectedError(
                         "no cube detected: " + ("; ".join(obs.notes) or "empty table")
                     )
@@ -197,12 +239,12 @@ class Orchestrator:
                     CycleState.RETRY, f"detection retry {attempts.detect}/{self.config.limits.detect}"
                 )
                 # doubling waits: a restarting vision service or a passing occlusion gets time
-                await asyncio.sleep(self.config.detect_retry_delay_s * 2 ** (attempts.detect - 1))
+                await self._wait(self.config.detect_retry_delay_s * 2 ** (attempts.detect - 1))
 
     # ------------------------------------------------------------------ PLAN
     async def _plan(
-        self, task: str, obs: Observation, out: PickOutcome, attempts: Attempts
-    ) -> tuple[GraspPlan | None, list[JointTrajectory | None]]:
+        self, task: TaskKind, obs: Observation, out: PickOutcome, attempts: Attempts
+    ) -> PlannedPick:
         while True:
             self._enter(CycleState.PLAN, f"grasp option {attempts.grasp_variants}")
             try:
@@ -220,22 +262,21 @@ class Orchestrator:
                 log.info("plan option failed (%s); trying the next one", exc)
 
     async def _plan_once(
-        self, task: str, obs: Observation, out: PickOutcome, alternative: int
-    ) -> tuple[GraspPlan, list[JointTrajectory | None]]:
+        self, task: TaskKind, obs: Observation, out: PickOutcome, alternative: int
+    ) -> PlannedPick:
         q = await self.robot.joints()
         # everything on the table that is not the target is an obstacle for the carried object too
-        target_cube = obs.cubes[0] if task == "sort-cubes" and obs.cubes else None
-        obs = replace(
-            obs,
-            obstacles=obs.obstacles
+        target_cube = obs.cubes[0] if task is TaskKind.SORT_CUBES and obs.cubes else None
+        obstacles = (
+            obs.obstacles
             + tuple(
                 _box_around(c.centroid, c.size / 2 + OBJECT_MARGIN_M)
                 for c in obs.cubes
                 if c is not target_cube
             )
-            + tuple(_box_around(r.center, r.length / 2 + OBJECT_MARGIN_M) for r in obs.rods[1:]),
+            + tuple(_box_around(r.center, r.length / 2 + OBJECT_MARGIN_M) for r in obs.rods[1:])
         )
-        if task == "stand-rod":
+        if task is TaskKind.STAND_ROD:
             rod = obs.rods[0]
             place = None
             if self.config.place_xy is not None:
@@ -244,7 +285,7 @@ class Orchestrator:
                     np.asarray(self.config.place_region_min),
                     np.asarray(self.config.place_region_max),
                 )
-                place = free_place_xy(obs, cands, self.config.place_clearance_m)
+                place = free_place_xy(replace(obs, obstacles=obstacles), cands, self.config.place_clearance_m)
                 if place is None:
                     raise PlanningError(
                         f"no free spot to stand the rod near {self.config.place_xy} "
@@ -255,69 +296,71 @@ class Orchestrator:
             # ±75 mm (pads 14 mm inside the end) was seen to stand it in eval)
             offsets = self.config.grasp_offsets_m
             offset = offsets[alternative % len(offsets)]
-            plan = await self.grasp.plan_rod(
-                rod, q, obs.obstacles, alternative // len(offsets), place, offset
-            )
+            plan = await self.grasp.plan_rod(rod, q, obstacles, alternative // len(offsets), place, offset)
             out.object_id = _object_id(rod)
         else:
             cube = obs.cubes[0]
-            plan = await self.grasp.plan_cube(cube, q, obs.obstacles, alternative)
+            plan = await self.grasp.plan_cube(cube, q, obstacles, alternative)
             out.object_class = f"cube_{cube.color}"
             out.object_id = f"cube@{cube.centroid[0]:.3f},{cube.centroid[1]:.3f}"
         out.grasp_quality = plan.quality
-        grasp_wp = next((w for w in plan.waypoints if w.gripper == "close"), plan.waypoints[0])
+        grasp_wp = next((w for w in plan.waypoints if w.gripper is GripperCommand.CLOSE), plan.waypoints[0])
         out.pick_pose = _pose_list(grasp_wp.T_base_tool)
         out.place_pose = [*map(float, plan.place_position), 0.0, 0.0, 0.0, 1.0]
-        trajs: list[JointTrajectory | None] = []
-        start = q
-        for w in plan.waypoints:
-            traj = await self._motion_for(w, start, obs, plan)
-            trajs.append(traj)
-            if traj is not None:
-                start = traj.positions[-1]
-        return plan, trajs
+        trajs = await self._motions(plan, range(len(plan.waypoints)), q, obstacles)
+        return PlannedPick(plan, trajs, obstacles)
 
-    async def _motion_for(self, w, start: np.ndarray, obs: Observation, plan: GraspPlan):  # type: ignore[no-untyped-def]
-        held = plan.held_object if w.holding else None
-        idx = plan.waypoints.index(w)
-        lifting_off = w.holding and idx > 0 and not plan.waypoints[idx - 1].holding
-        if w.motion == "hold" or (w.motion == "joint" and np.max(np.abs(w.joints - start)) < 1e-9):
-            return None
-        if w.motion == "joint":
-            return await self.motion.plan_joint(start, w.joints, obs.obstacles, held)
-        T = w.T_base_tool.copy()
-        if w.guard_force_n > 0:
-            T[:3, 3] += w.guard_overtravel_m * w.guard_direction
-        traj = await self.motion.plan_linear(
-            start,
-            T,
-            obs.obstacles,
-            held,
-            slow=w.guard_force_n > 0,
-            table_contact=lifting_off or w.guard_force_n > 0,
-        )
+    async def _motions(
+        self, plan: GraspPlan, indices: range, start: np.ndarray, obstacles: tuple[SeenBox, ...]
+    ) -> list[JointTrajectory | None]:
+        """The trajectories to the waypoints ``indices`` (None elsewhere) from ``start``, planned in one
+        request; a guarded approach is slowed to the grasp plan's touch-down speed."""
+        moves = {i: m for i in indices if (m := _move(plan, i)) is not None}
+        planned = await self.motion.plan_moves(start, list(moves.values()), obstacles)
+        if len(planned) != len(moves):
+            raise PlanningError(f"the motion planner answered {len(planned)} of {len(moves)} moves")
+        trajs: list[JointTrajectory | None] = [None] * len(plan.waypoints)
+        q = start
+        for i, traj in zip(moves, planned, strict=True):
+            if traj is None:
+                continue
+            trajs[i] = await self._paced(plan.waypoints[i], moves[i], traj, q)
+            q = traj.positions[-1]
+        return trajs
+
+    async def _paced(
+        self, w: PlannedWaypoint, move: Move, traj: JointTrajectory, start: np.ndarray
+    ) -> JointTrajectory:
         if w.guard_force_n > 0 and w.guard_speed_m_s > 0:
             # a guarded approach goes no faster than the grasp plan's touch-down speed
-            dist = float(np.linalg.norm(T[:3, 3] - (await self.motion.tool_pose(start))[:3, 3]))
+            dist = float(np.linalg.norm(move.target[:3, 3] - (await self.motion.tool_pose(start))[:3, 3]))
             needed = dist / w.guard_speed_m_s
             if traj.duration < needed:
                 traj = traj.scaled(needed / traj.duration)
         return traj
 
     # ------------------------------------------------------------------ EXECUTE
-    async def _execute(self, plan: GraspPlan, trajs: list[JointTrajectory | None], obs: Observation) -> None:
+    async def _execute(self, planned: PlannedPick, resume: Progress) -> None:
+        """From waypoint ``resume.index`` on (its motion skipped when the arm had reached it)."""
         cfg = self.config
-        for i, (w, traj) in enumerate(zip(plan.waypoints, trajs, strict=True)):
+        plan = planned.plan
+        for i in range(resume.index, len(plan.waypoints)):
+            w, traj = plan.waypoints[i], planned.trajs[i]
+            self._progress = Progress(i, reached=i == resume.index and resume.reached)
             state = state_for(w.name)
             if state is not self.state:
                 self._enter(state, w.name)
-            if traj is not None:
+            if traj is not None and not self._progress.reached:
                 q_now = await self.robot.joints()
                 if np.max(np.abs(traj.positions[0] - q_now)) > RESUME_TOLERANCE_RAD:
-                    # the arm is not where the plan assumed (a guarded stop, say): replan from here
-                    traj = await self._timed(
-                        self._motion_for(w, q_now, obs, plan), cfg.deadlines.plan_s, f"replanning {w.name}"
-                    )
+                    # the arm is not where the plan assumed (a guarded stop, an alarm): replan from here
+                    traj = (
+                        await self._timed(
+                            self._motions(plan, range(i, i + 1), q_now, planned.obstacles),
+                            cfg.deadlines.plan_s,
+                            f"replanning {w.name}",
+                        )
+                    )[i]
                 if traj is not None:
                     res = await self._timed(
                         self.robot.execute(traj, w.guard_force_n),
@@ -333,11 +376,13 @@ class Orchestrator:
                     )
                     if w.guard_force_n > 0 and not res.stopped_early:
                         log.warning("%s: no touch-down detected within the overtravel", w.name)
+            self._progress = Progress(i, reached=True)
             if w.gripper is not None:
+                close = w.gripper is GripperCommand.CLOSE
                 g = await self._timed(
-                    self.robot.gripper(w.gripper == "close"), cfg.deadlines.gripper_s, f"gripper {w.gripper}"
+                    self.robot.gripper(close), cfg.deadlines.gripper_s, f"gripper {w.gripper}"
                 )
-                if w.gripper == "close" and g.object_detected is False and cfg.verify_grasp:
+                if close and g.object_detected is False and cfg.verify_grasp:
                     raise GraspFailureError(f"{w.name}: the gripper closed on nothing")
             if state is CycleState.LIFT and cfg.verify_grasp and _is_last_of(plan, i, CycleState.LIFT):
                 holding = await self._timed(self.robot.holding(), cfg.deadlines.gripper_s, "grasp check")
@@ -354,11 +399,12 @@ class Orchestrator:
         if np.max(np.abs(q - home)) < 1e-3:
             return
         traj = await self._timed(
-            self.motion.plan_joint(q, home, (), None),
+            self._plan_single(q, Move(MotionKind.JOINT, home, label="SAFE_HOME"), ()),
             self.config.deadlines.plan_s,
             "planning the way to safe home",
         )
-        await self._timed(self.robot.execute(traj), self.config.deadlines.motion_s, "moving to safe home")
+        if traj is not None:
+            await self._timed(self.robot.execute(traj), self.config.deadlines.motion_s, "moving to safe home")
 
     async def _return_home(self, plan: GraspPlan, obs: Observation) -> None:
         """DONE: back to the plan's safe home, out of the camera's view of the table."""
@@ -369,15 +415,24 @@ class Orchestrator:
             q = await self.robot.joints()
             if np.max(np.abs(q - home)) > 1e-3:
                 traj = await self._timed(
-                    self.motion.plan_joint(q, home, obstacles, None),
+                    self._plan_single(q, Move(MotionKind.JOINT, home, label="HOME"), obstacles),
                     self.config.deadlines.plan_s,
                     "planning the way home",
                 )
-                await self._timed(self.robot.execute(traj), self.config.deadlines.motion_s, "returning home")
+                if traj is not None:
+                    await self._timed(
+                        self.robot.execute(traj), self.config.deadlines.motion_s, "returning home"
+                    )
         except SafetyError:
             raise
         except RobotError as exc:  # the object is placed; a failed way home is reported, not fatal
             log.warning("could not return to safe home after placing: %s", exc)
+
+    async def _plan_single(
+        self, start: np.ndarray, move: Move, obstacles: tuple[SeenBox, ...]
+    ) -> JointTrajectory | None:
+        (traj,) = await self.motion.plan_moves(start, [move], obstacles)
+        return traj
 
     # ------------------------------------------------------------------ recovery helpers
     async def _back_off_open(self) -> None:
@@ -385,8 +440,10 @@ class Orchestrator:
         await self.robot.gripper(False)
         q = await self.robot.joints()
         try:
-            up = await self.motion.plan_linear(q, _raised(await self.motion.tool_pose(q), 0.08), (), None)
-            await self.robot.execute(up)
+            up = _raised(await self.motion.tool_pose(q), 0.08)
+            traj = await self._plan_single(q, Move(MotionKind.LINEAR, up, label="BACK_OFF"), ())
+            if traj is not None:
+                await self.robot.execute(traj)
         except RobotError as exc:
             log.warning("could not back off after a failed grasp: %s", exc)
 
@@ -398,6 +455,22 @@ class Orchestrator:
             log.warning("stop while aborting failed: %s", exc)
 
 
+def _move(plan: GraspPlan, i: int) -> Move | None:
+    """The move to waypoint ``i`` of a grasp plan, in its scene; None for a waypoint without motion."""
+    w = plan.waypoints[i]
+    held = plan.held_object if w.holding else None
+    if w.motion is MotionKind.HOLD:
+        return None
+    if w.motion is MotionKind.JOINT:
+        return Move(MotionKind.JOINT, w.joints, held, label=w.name)
+    guarded = w.guard_force_n > 0
+    T = w.T_base_tool.copy()
+    if guarded:  # a guarded approach may go as far as the overtravel; touch-down stops it earlier
+        T[:3, 3] += w.guard_overtravel_m * w.guard_direction
+    lifting_off = w.holding and i > 0 and not plan.waypoints[i - 1].holding
+    return Move(MotionKind.LINEAR, T, held, slow=guarded, table_contact=lifting_off or guarded, label=w.name)
+
+
 PLACED_TOP_CLEARANCE_M = 0.03
 
 
@@ -406,7 +479,7 @@ def _placed_box(plan: GraspPlan) -> SeenBox:
     held = plan.held_object
     radius = float(getattr(held, "radius", 0.0) or 0.0) or 0.02
     height = float(getattr(held, "length", 0.0) or 0.0) or 0.06
-    if plan.task == "sort-cubes":
+    if plan.task is TaskKind.SORT_CUBES:
         size = list(getattr(held, "size", []) or [0.05, 0.05, 0.05])
         radius, height = max(size[:2]) / 2, size[2]
     p = np.asarray(plan.place_position, dtype=float)

@@ -6,11 +6,14 @@ scripted fakes. Everything is in the base frame, SI units.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
 
+from services.common.errors import InvalidInputError
+from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.kinematics.trajectory import JointTrajectory
 
 
@@ -61,10 +64,10 @@ class GripOutcome:
 @dataclass
 class PlannedWaypoint:
     name: str
-    motion: str  # "joint" | "linear" | "hold"
+    motion: MotionKind
     T_base_tool: np.ndarray
     joints: np.ndarray
-    gripper: str | None = None  # "open" | "close"
+    gripper: GripperCommand | None = None  # after the arm has reached the waypoint
     guard_force_n: float = 0.0
     guard_overtravel_m: float = 0.0
     guard_direction: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, -1.0]))
@@ -74,7 +77,7 @@ class PlannedWaypoint:
 
 @dataclass
 class GraspPlan:
-    task: str
+    task: TaskKind
     waypoints: list[PlannedWaypoint]
     quality: float
     held_object: object | None  # motion's AttachedObject message, sent while holding
@@ -102,22 +105,33 @@ class GraspPort(Protocol):
     ) -> GraspPlan: ...
 
 
-class MotionPort(Protocol):
-    async def plan_joint(
-        self, start: np.ndarray, goal: np.ndarray, obstacles: tuple[SeenBox, ...], held: object | None
-    ) -> JointTrajectory: ...
+@dataclass(frozen=True)
+class Move:
+    """One move for the motion planner, in the scene and at the speed of that move."""
 
-    async def plan_linear(
-        self,
-        start: np.ndarray,
-        T_goal: np.ndarray,
-        obstacles: tuple[SeenBox, ...],
-        held: object | None,
-        slow: bool = False,
-        table_contact: bool = False,
-    ) -> JointTrajectory:
-        """A straight tool line; ``table_contact`` lets the held object touch the table (lift-off,
-        set-down)."""
+    kind: MotionKind  # JOINT: a joint-space move to joint positions; LINEAR: a straight tool line
+    target: np.ndarray  # JOINT: joint positions (rad); LINEAR: the tool pose T_base_tool (4×4)
+    held: object | None = None  # motion's AttachedObject, carried on this move
+    slow: bool = False  # a guarded approach: at the touch-down speed scale
+    table_contact: bool = False  # the held object may touch the table (lift-off, set-down)
+    label: str = ""
+
+    def __post_init__(self) -> None:
+        shape = {MotionKind.JOINT: (self.target.ndim == 1), MotionKind.LINEAR: (self.target.shape == (4, 4))}
+        if not shape.get(self.kind, False):
+            raise InvalidInputError(
+                f"move {self.label or 'unlabelled'}: a {self.kind} move needs "
+                f"{'joint positions' if self.kind is MotionKind.JOINT else 'a 4×4 tool pose'}, "
+                f"got shape {self.target.shape}"
+            )
+
+
+class MotionPort(Protocol):
+    async def plan_moves(
+        self, start: np.ndarray, moves: Sequence[Move], obstacles: tuple[SeenBox, ...]
+    ) -> list[JointTrajectory | None]:
+        """All ``moves`` in one request, each from where the previous one ends; one entry per move,
+        None for a joint move to where the arm already is."""
 
     async def tool_pose(self, q: np.ndarray) -> np.ndarray: ...
 

@@ -1,17 +1,39 @@
-"""Recovery decisions (LLD §15.2): which error spends which retry, and when it gives up."""
+"""Recovery (LLD §15.2): which error spends which retry and when it gives up, and the orchestrator
+carrying each recovery out over scripted fakes (states it went through, commands the robot got)."""
 
 from __future__ import annotations
 
+import numpy as np
+import pytest
+
 from services.common.errors import (
+    CameraConnectionError,
     CollisionError,
     ControllerError,
+    EmergencyStopError,
     GraspFailureError,
+    IKFailureError,
     InvalidInputError,
     ObjectNotDetectedError,
     SafetyError,
     VisionError,
 )
+from services.common.modes import GripperCommand
 from services.task.recovery import Action, Attempts, RetryLimits, decide
+from services.task.states import CycleState
+from tests.task.fakes import (
+    HELD_ROD,
+    FakeCell,
+    FakeGrasp,
+    FakeMotion,
+    FakeRobot,
+    FakeVision,
+    Fault,
+    rod_at,
+    seen,
+)
+
+CLOSE, OPEN = GripperCommand.CLOSE, GripperCommand.OPEN
 
 LIMITS = RetryLimits(detect=2, grasp_variants=3, alarms=1, regrasps=1)
 
@@ -42,3 +64,175 @@ def test_counters_are_shared_per_kind_and_history_keeps_every_error() -> None:
     assert decide(VisionError("c"), attempts, LIMITS) is Action.ABORT
     assert attempts.detect == 2 and len(attempts.history) == 3
     assert attempts.history[0] == "ObjectNotDetectedError: a"
+
+
+# --- the orchestrator carrying the decisions out, over scripted fakes ---------------------------
+
+
+async def test_detect_failed_retries_with_doubling_waits_then_aborts_without_moving() -> None:
+    cell = FakeCell(FakeVision(seen(notes=("table empty",))))
+    outcome = await cell.run()
+    assert not outcome.success and outcome.stage_reached == "DETECT"
+    assert outcome.error_code == "ObjectNotDetectedError" and "no rod detected" in outcome.failure_reason
+    D, F, R = CycleState.DETECT, CycleState.DETECT_FAILED, CycleState.RETRY
+    assert cell.states == [CycleState.INIT, D, F, R, D, F, R, D, F, CycleState.ABORT]
+    assert cell.wait.waits == [0.5, 1.0]  # detect_retry_delay_s, doubled
+    assert cell.vision.calls == 3 and cell.grasp.calls == []
+    assert cell.robot.commands == [("recover",)]  # nothing moved
+
+
+async def test_a_camera_hiccup_is_retried_and_the_cycle_goes_on() -> None:
+    cell = FakeCell(FakeVision(CameraConnectionError("vision restarting"), seen(rod_at(0.5, 0.1))))
+    outcome = await cell.run()
+    assert outcome.success and outcome.attempts == 1
+    assert cell.states[:6] == [
+        CycleState.INIT,
+        CycleState.DETECT,
+        CycleState.DETECT_FAILED,
+        CycleState.RETRY,
+        CycleState.DETECT,
+        CycleState.PLAN,
+    ]
+    assert cell.wait.waits == [0.5]
+
+
+async def test_a_failed_plan_tries_the_next_grasp_option() -> None:
+    cell = FakeCell(
+        FakeVision(seen(rod_at(0.5, 0.1))),
+        grasp=FakeGrasp({0: IKFailureError("out of reach")}),
+        motion=FakeMotion({0: CollisionError("the tool line hits a cube")}),
+    )
+    outcome = await cell.run()
+    assert outcome.success and outcome.attempts == 3
+    # option 0: grasp refused; option 1: its motion collided; option 2 was carried out
+    assert [(c.alternative, c.grasp_offset_m) for c in cell.grasp.calls] == [
+        (0, 0.0),
+        (0, 0.035),
+        (0, -0.035),
+    ]
+    assert cell.states[:5] == [
+        CycleState.INIT,
+        CycleState.DETECT,
+        CycleState.PLAN,
+        CycleState.PLAN,
+        CycleState.PLAN,
+    ]
+    assert cell.states[5] is CycleState.APPROACH
+    assert cell.vision.calls == 1  # no need to look again
+    assert cell.moves()[0] == "PRE_GRASP"
+
+
+async def test_when_every_grasp_option_fails_the_cycle_aborts_in_plan_and_nothing_moves() -> None:
+    refuse = {k: IKFailureError(f"option {k}: out of reach") for k in range(5)}
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))), grasp=FakeGrasp(refuse))
+    outcome = await cell.run()
+    assert not outcome.success and outcome.stage_reached == "PLAN" and outcome.error_code == "IKFailureError"
+    assert "option 2" in outcome.failure_reason  # grasp_variants=3: the third refusal ends it
+    assert len(cell.grasp.calls) == 3 and cell.states[-1] is CycleState.ABORT
+    assert cell.robot.commands == [("recover",)]
+
+
+async def test_an_alarm_is_cleared_and_the_cycle_resumes_from_where_the_arm_stopped() -> None:
+    # the alarm stops the GRASP line half way down
+    cell = FakeCell(
+        FakeVision(seen(rod_at(0.5, 0.1))), robot=FakeRobot(faults={1: Fault(ControllerError("alarm 22"))})
+    )
+    outcome = await cell.run()
+    assert outcome.success and outcome.attempts == 2 and outcome.error_code == "ControllerError"
+    assert cell.robot.commands[:8] == [
+        ("recover",),
+        ("move", "PRE_GRASP", False),
+        ("gripper", OPEN),
+        ("move", "GRASP", False),  # alarm half way
+        ("recover",),
+        ("move", "GRASP", False),  # the rest of the line, replanned from where the arm stopped
+        ("gripper", CLOSE),
+        ("move", "LIFT", False),
+    ]
+    assert cell.motion.requests[1].labels == ["GRASP"]
+    resumed_from = np.array(cell.motion.requests[1].start)
+    assert resumed_from[2] == pytest.approx((0.10 + 0.02) / 2)  # half way between PRE_GRASP and GRASP
+    # the same detection and plan go on: the state re-entered says so
+    assert cell.vision.calls == 1 and len(cell.grasp.calls) == 1
+    i = cell.states.index(CycleState.GRASP)
+    assert cell.states[i : i + 3] == [CycleState.GRASP, CycleState.GRASP, CycleState.LIFT]
+    assert "resuming at GRASP after ControllerError" in cell.messages[i + 1]
+
+
+async def test_an_alarm_while_carrying_the_rod_resumes_with_the_rod_in_the_gripper() -> None:
+    # move 3 is REORIENT, the rod in the gripper
+    cell = FakeCell(
+        FakeVision(seen(rod_at(0.5, 0.1))), robot=FakeRobot(faults={3: Fault(ControllerError("alarm 117"))})
+    )
+    outcome = await cell.run()
+    assert outcome.success and outcome.attempts == 2
+    after_fault = cell.robot.commands[cell.robot.commands.index(("move", "REORIENT", False)) :]
+    assert after_fault[:4] == [
+        ("move", "REORIENT", False),  # alarm
+        ("recover",),
+        ("move", "REORIENT", False),
+        ("move", "PLACE", True),
+    ]
+    # never opened in between, never looked for a rod on the table again
+    assert ("gripper", OPEN) not in after_fault[:4] and cell.vision.calls == 1
+    resume = cell.motion.requests[1]
+    assert resume.labels == ["REORIENT"] and resume.moves[0].held is HELD_ROD
+    assert CycleState.DETECT not in cell.states[cell.states.index(CycleState.REORIENT) :]
+
+
+async def test_alarms_beyond_the_budget_abort_and_leave_the_arm_stopped() -> None:
+    faults = {k: Fault(ControllerError(f"alarm {k}")) for k in (1, 2, 3)}
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))), robot=FakeRobot(faults=faults))
+    outcome = await cell.run()
+    assert not outcome.success and outcome.stage_reached == "GRASP" and "alarm 3" in outcome.failure_reason
+    assert cell.robot.commands[-2:] == [("move", "GRASP", False), ("stop",)]
+    assert [c for c in cell.robot.commands if c == ("recover",)] == [("recover",)] * 3  # start + 2 budgeted
+    assert cell.states[-1] is CycleState.ABORT
+
+
+async def test_a_slipped_grasp_backs_off_open_looks_again_and_regrasps() -> None:
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))), robot=FakeRobot(holding_script=[False, True]))
+    outcome = await cell.run()
+    assert outcome.success and outcome.attempts == 2 and outcome.error_code == "GraspFailureError"
+    lift = cell.robot.commands.index(("move", "LIFT", False))
+    assert cell.robot.commands[lift : lift + 7] == [
+        ("move", "LIFT", False),  # the sensor then says the rod is not in the gripper
+        ("recover",),
+        ("gripper", OPEN),
+        ("move", "BACK_OFF", False),
+        ("move", "SAFE_HOME", False),  # the second grasp, planned on a new detection from up here
+        ("move", "PRE_GRASP", False),
+        ("gripper", OPEN),
+    ]
+    assert cell.motion.requests[1].labels == ["BACK_OFF"]
+    assert cell.motion.requests[1].moves[0].target[2, 3] == pytest.approx(0.20 + 0.08)
+    s = cell.states
+    first_lift = s.index(CycleState.LIFT)
+    assert s[first_lift + 1 : first_lift + 4] == [CycleState.DETECT, CycleState.PLAN, CycleState.APPROACH]
+    assert CycleState.REORIENT not in s[:first_lift]  # never carried on with an empty gripper
+    assert cell.vision.calls == 2 and len(cell.grasp.calls) == 2
+
+
+async def test_a_slip_beyond_the_regrasp_budget_aborts_open_handed() -> None:
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))), robot=FakeRobot(holding_script=[False]))
+    outcome = await cell.run()
+    assert not outcome.success and outcome.error_code == "GraspFailureError"
+    assert cell.moves().count("LIFT") == 2 and "REORIENT" not in cell.moves()
+    assert cell.robot.commands[-1] == ("stop",)
+
+
+async def test_a_safety_stop_hands_over_to_the_operator_and_nothing_is_cleared() -> None:
+    # move 2: LIFT, the protective stop trips half way up
+    fault = Fault(EmergencyStopError("emergency stop pressed"), safety=True)
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))), robot=FakeRobot(faults={2: fault}))
+    with pytest.raises(EmergencyStopError):
+        await cell.run()
+    assert cell.states[-2:] == [CycleState.LIFT, CycleState.ESTOP]
+    # the last command is the move that was stopped: no clearing, no stop-and-retry, no gripper action
+    assert cell.robot.commands[-1] == ("move", "LIFT", False)
+    assert cell.robot.commands.count(("recover",)) == 1
+    assert cell.robot.safety_stopped and len(cell.motion.requests) == 1
+    # the next cycle refuses to start until the operator releases the stop
+    with pytest.raises(EmergencyStopError, match="release it"):
+        await cell.run()
+    assert cell.states[-2:] == [CycleState.INIT, CycleState.ESTOP]

@@ -1,0 +1,107 @@
+"""The pick cycle over scripted fakes: states, the one motion request per plan, the robot's commands."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from services.common.modes import GripperCommand, MotionKind, TaskKind
+from services.task.ports import SeenCube
+from services.task.states import CycleState
+from tests.task.fakes import HELD_ROD, HOME, FakeCell, FakeVision, rod_at, seen
+
+CLOSE, OPEN = GripperCommand.CLOSE, GripperCommand.OPEN
+
+ROD_STATES = [
+    CycleState.INIT,
+    CycleState.DETECT,
+    CycleState.PLAN,
+    CycleState.APPROACH,
+    CycleState.GRASP,
+    CycleState.LIFT,
+    CycleState.REORIENT,
+    CycleState.PLACE,
+    CycleState.RELEASE,
+    CycleState.DONE,  # returning to safe home
+    CycleState.DONE,  # object placed
+]
+
+
+async def test_a_rod_cycle_runs_every_state_and_sends_the_plan_in_order() -> None:
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))))
+    outcome = await cell.run(TaskKind.STAND_ROD)
+    assert outcome.success and outcome.stage_reached == "DONE" and outcome.attempts == 1
+    assert outcome.task is TaskKind.STAND_ROD and outcome.object_class == "rod"
+    assert cell.states == ROD_STATES
+    assert cell.robot.commands == [
+        ("recover",),
+        ("move", "PRE_GRASP", False),
+        ("gripper", OPEN),
+        ("move", "GRASP", False),
+        ("gripper", CLOSE),
+        ("move", "LIFT", False),
+        ("move", "REORIENT", False),
+        ("move", "PLACE", True),  # guarded: touches down before the end of its line
+        ("gripper", OPEN),
+        ("move", "RETRACT", False),
+        ("move", "HOME", False),
+    ]
+    assert cell.wait.waits == []
+
+
+async def test_the_whole_plan_is_one_motion_request_with_each_moves_scene() -> None:
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))))
+    await cell.run()
+    first = cell.motion.requests[0]
+    # RELEASE does not move (a gripper action where the arm stands): it is not sent
+    assert first.labels == ["SAFE_HOME", "PRE_GRASP", "GRASP", "LIFT", "REORIENT", "PLACE", "RETRACT"]
+    assert first.start == tuple(HOME)
+    by = {m.label: m for m in first.moves}
+    assert [by[n].kind for n in ("SAFE_HOME", "PRE_GRASP", "GRASP")] == [
+        MotionKind.JOINT,
+        MotionKind.JOINT,
+        MotionKind.LINEAR,
+    ]
+    carried = {n for n, m in by.items() if m.held is HELD_ROD}
+    assert carried == {"LIFT", "REORIENT", "PLACE"}
+    # the held rod may touch the table while lifting off and setting down, nowhere else
+    assert {n for n, m in by.items() if m.table_contact} == {"LIFT", "PLACE"}
+    assert {n for n, m in by.items() if m.slow} == {"PLACE"}
+    # the guarded approach aims past the nominal pose by the overtravel
+    place = next(w for w in cell.grasp.plans[0].waypoints if w.name == "PLACE")
+    assert by["PLACE"].target[2, 3] == pytest.approx(place.T_base_tool[2, 3] - 0.02)
+    # afterwards: RETRACT replanned from where PLACE touched down, then the way home
+    assert [r.labels for r in cell.motion.requests[1:]] == [["RETRACT"], ["HOME"]]
+    assert cell.motion.requests[1].start != tuple(by["PLACE"].target[:3, 3]) + (0.0, 0.0, 0.0)
+
+
+async def test_a_guarded_approach_is_paced_at_the_touch_down_speed() -> None:
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))))
+    outcome = await cell.run()
+    # REORIENT ends at z 0.30, PLACE aims at 0.12 − 0.02 overtravel: 0.20 m at 0.02 m/s = 10 s,
+    # of which the fake arm runs 3/4 before touching down
+    assert outcome.stage_durations_s["PLACE"] == pytest.approx(0.75 * 10.0)
+    # stage times are on the injected clock (the fake controller's): they add up to the cycle
+    assert sum(outcome.stage_durations_s.values()) == pytest.approx(outcome.cycle_time_s)
+
+
+async def test_a_cube_cycle_targets_the_first_cube_and_sees_the_others_as_obstacles() -> None:
+    cubes = (SeenCube(np.array([0.5, 0.1, 0.025]), "red"), SeenCube(np.array([0.4, -0.1, 0.025]), "blue"))
+    cell = FakeCell(FakeVision(seen(cubes=cubes)))
+    outcome = await cell.run(TaskKind.SORT_CUBES)
+    assert outcome.success and outcome.object_class == "cube_red"
+    assert cell.grasp.calls[0].target == "cube_red"
+    assert CycleState.TRANSPORT in cell.states and CycleState.REORIENT not in cell.states
+    (box,) = cell.motion.requests[0].obstacles  # the blue cube, from the table up
+    assert box.min[2] == 0.0 and np.allclose((box.min[:2] + box.max[:2]) / 2, [0.4, -0.1])
+
+
+async def test_the_arm_is_brought_home_first_when_a_cycle_starts_elsewhere() -> None:
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))))
+    cell.robot.q = HOME + np.array([0.1, 0.0, 0.0, 0.0, 0.0, 0.0])
+    outcome = await cell.run()
+    assert outcome.success
+    assert cell.motion.requests[0].labels == ["SAFE_HOME"]
+    assert cell.robot.commands[:2] == [("recover",), ("move", "SAFE_HOME", False)]
+    # the grasp plan then starts at home: its SAFE_HOME needs no motion
+    assert cell.moves()[1] == "PRE_GRASP"
