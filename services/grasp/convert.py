@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import logging
+import math
 from collections.abc import Iterable
 
 import numpy as np
@@ -9,20 +11,23 @@ from pickplace.v1 import common_pb2, grasp_pb2, motion_pb2
 
 from services.common.errors import InvalidInputError
 from services.common.messages import matrix_to_pose
+from services.common.modes import GripperCommand, MotionKind
 from services.grasp.plan import Grasp, HeldObject, PickPlan, Waypoint
 from services.kinematics.collision import Box
+
+log = logging.getLogger("pickplace.grasp.convert")
 
 Array = np.ndarray
 
 MOTION = {
-    "joint": grasp_pb2.PickWaypoint.JOINT,
-    "linear": grasp_pb2.PickWaypoint.LINEAR,
-    "hold": grasp_pb2.PickWaypoint.HOLD,
+    MotionKind.JOINT: grasp_pb2.PickWaypoint.JOINT,
+    MotionKind.LINEAR: grasp_pb2.PickWaypoint.LINEAR,
+    MotionKind.HOLD: grasp_pb2.PickWaypoint.HOLD,
 }
 GRIPPER = {
     None: grasp_pb2.PickWaypoint.GRIPPER_NONE,
-    "open": grasp_pb2.PickWaypoint.OPEN,
-    "close": grasp_pb2.PickWaypoint.CLOSE,
+    GripperCommand.OPEN: grasp_pb2.PickWaypoint.OPEN,
+    GripperCommand.CLOSE: grasp_pb2.PickWaypoint.CLOSE,
 }
 
 
@@ -113,3 +118,23 @@ def joints_or(values: Iterable[float], default: Array, dof: int, name: str) -> A
     if not np.all(np.isfinite(arr)):
         raise InvalidInputError(f"{name} contains NaN or infinite values: {arr.tolist()}")
     return arr
+
+
+def rod_size(
+    request: grasp_pb2.PickAndStandRequest, configured_length_m: float, configured_diameter_m: float
+) -> tuple[float, float]:
+    """The rod's (length, diameter) in m as vision measured them; the configured size only for a field
+    the request does not carry (said in a log line). A size that is not a positive number is refused."""
+    size = []
+    for name, configured in (("length", configured_length_m), ("diameter", configured_diameter_m)):
+        if not request.HasField(name):  # type: ignore[arg-type]
+            log.info("the request carries no rod %s: planning with the configured %.4f m", name, configured)
+            size.append(configured)
+            continue
+        value = float(getattr(request, name))
+        if not (math.isfinite(value) and value > 0):
+            raise InvalidInputError(
+                f"rod {name} {value!r} m: a measured size must be a positive number of metres"
+            )
+        size.append(value)
+    return size[0], size[1]

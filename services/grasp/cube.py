@@ -22,6 +22,7 @@ from numpy.typing import ArrayLike
 
 from services.common.errors import CollisionError, IKFailureError, InvalidInputError, PlanningError
 from services.common.frames import check_transform, finite_vector, invert_transform
+from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.common.settings import GraspSettings
 from services.grasp.geometry import pose, pose_path, rotation_z
 from services.grasp.plan import Grasp, Guard, HeldObject, PickPlan, Waypoint
@@ -260,18 +261,27 @@ def _assemble(
     guard = Guard(cc.touch_force_drop_n, cc.guard_overtravel_m + cc.place_clearance_m, cc.guard_speed_m_s)
     T_home = fk(spec, home) @ T_flange_tool
     wps = (
-        Waypoint("SAFE_HOME", T_home, "joint", home.copy()),
-        Waypoint("PRE_GRASP", P["PRE_GRASP"], "joint", q_pick[0].copy(), gripper="open"),
-        Waypoint("GRASP", P["GRASP"], "linear", q_pick[n_pre].copy(), gripper="close"),
-        Waypoint("LIFT", P["LIFT"], "linear", q_pick[-1].copy(), holding=True),
-        Waypoint("TRANSPORT", P["TRANSPORT"], "joint", q_place[0].copy(), holding=True),
-        Waypoint("PLACE_ABOVE", P["PLACE_ABOVE"], "linear", q_place[n_above].copy(), holding=True),
-        Waypoint("PLACE", P["PLACE"], "linear", q_place[i_place].copy(), guard=guard, holding=True),
-        Waypoint("RELEASE", P["PLACE"], "hold", q_place[i_place].copy(), gripper="open", holding=True),
-        Waypoint("RETRACT", P["RETRACT"], "linear", q_place[-1].copy()),
+        Waypoint("SAFE_HOME", T_home, MotionKind.JOINT, home.copy()),
+        Waypoint(
+            "PRE_GRASP", P["PRE_GRASP"], MotionKind.JOINT, q_pick[0].copy(), gripper=GripperCommand.OPEN
+        ),
+        Waypoint("GRASP", P["GRASP"], MotionKind.LINEAR, q_pick[n_pre].copy(), gripper=GripperCommand.CLOSE),
+        Waypoint("LIFT", P["LIFT"], MotionKind.LINEAR, q_pick[-1].copy(), holding=True),
+        Waypoint("TRANSPORT", P["TRANSPORT"], MotionKind.JOINT, q_place[0].copy(), holding=True),
+        Waypoint("PLACE_ABOVE", P["PLACE_ABOVE"], MotionKind.LINEAR, q_place[n_above].copy(), holding=True),
+        Waypoint("PLACE", P["PLACE"], MotionKind.LINEAR, q_place[i_place].copy(), guard=guard, holding=True),
+        Waypoint(
+            "RELEASE",
+            P["PLACE"],
+            MotionKind.HOLD,
+            q_place[i_place].copy(),
+            gripper=GripperCommand.OPEN,
+            holding=True,
+        ),
+        Waypoint("RETRACT", P["RETRACT"], MotionKind.LINEAR, q_place[-1].copy()),
     )
     return PickPlan(
-        task="sort-cubes",
+        task=TaskKind.SORT_CUBES,
         waypoints=wps,
         grasp=replace(grasp, q=q_pick[n_pre].copy()),
         held=held,

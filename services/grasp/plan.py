@@ -16,10 +16,9 @@ from typing import Literal
 
 import numpy as np
 
-Array = np.ndarray
+from services.common.modes import GripperCommand, MotionKind, TaskKind
 
-Motion = Literal["joint", "linear", "hold"]
-GripperAction = Literal["open", "close"]
+Array = np.ndarray
 
 
 @dataclass(frozen=True)
@@ -47,9 +46,9 @@ class HeldObject:
 class Waypoint:
     name: str
     T_base_tool: Array
-    motion: Motion
+    motion: MotionKind
     q: Array  # joints (rad) of the planned IK branch at this pose
-    gripper: GripperAction | None = None
+    gripper: GripperCommand | None = None
     guard: Guard | None = None
     holding: bool = False  # the object is in the gripper on the way to this waypoint
 
@@ -79,7 +78,7 @@ class Grasp:
 
 @dataclass(frozen=True)
 class PickPlan:
-    task: Literal["stand-rod", "sort-cubes"]
+    task: TaskKind
     waypoints: tuple[Waypoint, ...]
     grasp: Grasp
     held: HeldObject

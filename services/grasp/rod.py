@@ -39,6 +39,7 @@ from services.common.errors import (
     PlanningError,
 )
 from services.common.frames import finite_vector, invert_transform
+from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.common.settings import GraspSettings
 from services.grasp.force_closure import evaluate_force_closure
 from services.grasp.geometry import cylinder_lowest_z, lowest_gripper_z, pose, pose_path, tool_rotation, unit
@@ -413,17 +414,21 @@ def _assemble(
 
     T_home = fk(spec, home) @ T_flange_tool
     wps = (
-        Waypoint("SAFE_HOME", T_home, "joint", home.copy()),
-        Waypoint("PRE_GRASP", P["PRE_GRASP"], "joint", q_path[0].copy(), gripper="open"),
-        Waypoint("GRASP", P["GRASP"], "linear", q("GRASP"), gripper="close"),
-        Waypoint("LIFT", P["LIFT"], "linear", q("LIFT"), holding=True),
-        Waypoint("REORIENT", P["REORIENT"], "linear", q("REORIENT"), holding=True),
-        Waypoint("CARRY", P["CARRY"], "linear", q("CARRY"), holding=True),
-        Waypoint("PLACE_ABOVE", P["PLACE_ABOVE"], "linear", q("PLACE_ABOVE"), holding=True),
-        Waypoint("PLACE", P["PLACE"], "linear", q("PLACE"), guard=guard, holding=True),
-        Waypoint("RELEASE", P["PLACE"], "hold", q("PLACE"), gripper="open", holding=True),
-        Waypoint("RETRACT", P["RETRACT"], "linear", q("RETRACT")),
-        Waypoint("RETRACT_UP", P["RETRACT_UP"], "linear", q("RETRACT_UP")),
+        Waypoint("SAFE_HOME", T_home, MotionKind.JOINT, home.copy()),
+        Waypoint(
+            "PRE_GRASP", P["PRE_GRASP"], MotionKind.JOINT, q_path[0].copy(), gripper=GripperCommand.OPEN
+        ),
+        Waypoint("GRASP", P["GRASP"], MotionKind.LINEAR, q("GRASP"), gripper=GripperCommand.CLOSE),
+        Waypoint("LIFT", P["LIFT"], MotionKind.LINEAR, q("LIFT"), holding=True),
+        Waypoint("REORIENT", P["REORIENT"], MotionKind.LINEAR, q("REORIENT"), holding=True),
+        Waypoint("CARRY", P["CARRY"], MotionKind.LINEAR, q("CARRY"), holding=True),
+        Waypoint("PLACE_ABOVE", P["PLACE_ABOVE"], MotionKind.LINEAR, q("PLACE_ABOVE"), holding=True),
+        Waypoint("PLACE", P["PLACE"], MotionKind.LINEAR, q("PLACE"), guard=guard, holding=True),
+        Waypoint(
+            "RELEASE", P["PLACE"], MotionKind.HOLD, q("PLACE"), gripper=GripperCommand.OPEN, holding=True
+        ),
+        Waypoint("RETRACT", P["RETRACT"], MotionKind.LINEAR, q("RETRACT")),
+        Waypoint("RETRACT_UP", P["RETRACT_UP"], MotionKind.LINEAR, q("RETRACT_UP")),
     )
     eps, closure = _rod_grasp_quality(rod, cfg, P["GRASP"], o.held.T_tool_object)
     wq = width_quality(rod.diameter, stroke_m)
@@ -443,7 +448,7 @@ def _assemble(
         label=f"rod: top-down, jaw ⟂ axis, offset {rc.grasp_offset_m:+.3f} m",
     )
     return PickPlan(
-        task="stand-rod",
+        task=TaskKind.STAND_ROD,
         waypoints=wps,
         grasp=grasp,
         held=o.held,
