@@ -19,6 +19,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import numpy as np
 
+from services.common.modes import GripperCommand, MotionKind
 from services.common.settings import Settings, load_settings
 from services.grasp.collision import MotionCollisionCheck, tool_geometry
 from services.grasp.cube import CubeObservation, plan_pick_and_place
@@ -64,9 +65,9 @@ def execute_plan_in_twin(engine: object, plan: PickPlan) -> dict[str, float]:
     out: dict[str, float] = {"touch_detected": 0.0, "slip_mm": 0.0, "slip_deg": 0.0}
     T_ref: Array | None = None
     for w in plan.waypoints:
-        if w.motion == "joint":
+        if w.motion == MotionKind.JOINT:
             arm.move_joints(w.q, max(0.8, float(np.max(np.abs(w.q - arm.q))) / 1.2))
-        elif w.motion == "linear":
+        elif w.motion == MotionKind.LINEAR:
             T0 = arm.tool_pose()
             dist = float(np.linalg.norm(w.T_base_tool[:3, 3] - T0[:3, 3]))
             cosang = (np.trace(T0[:3, :3].T @ w.T_base_tool[:3, :3]) - 1) / 2
@@ -88,8 +89,10 @@ def execute_plan_in_twin(engine: object, plan: PickPlan) -> dict[str, float]:
                 out["touch_detected"] = float(touched)
                 out["tilt_before_release_deg"] = gt.axis_tilt_deg(gt.object_pose(engine, "rod"))  # type: ignore[arg-type]
         if w.gripper is not None:
-            arm.set_gripper(w.gripper == "close", wait_s=0.6 if w.gripper == "close" else 0.5)
-            if w.gripper == "close":
+            arm.set_gripper(
+                w.gripper == GripperCommand.CLOSE, wait_s=0.6 if w.gripper == GripperCommand.CLOSE else 0.5
+            )
+            if w.gripper == GripperCommand.CLOSE:
                 T_ref = gt.T_tool_object(engine, "rod")  # type: ignore[arg-type]
         if T_ref is not None and w.holding and w.gripper is None:
             mm, deg = gt.slip(T_ref, gt.T_tool_object(engine, "rod"))  # type: ignore[arg-type]

@@ -8,6 +8,8 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from services.common.modes import TaskKind
+
 
 class Strict(BaseModel):
     model_config = ConfigDict(extra="forbid")
@@ -73,7 +75,7 @@ class SystemStatus(BaseModel):
 
 
 class StartRequest(Strict):
-    task: Literal["stand-rod", "sort-cubes"] = "stand-rod"
+    task: TaskKind = TaskKind.STAND_ROD
     cycles: int = Field(0, ge=0, le=100_000, description="0 = until stopped")
 
 

@@ -20,6 +20,7 @@ from services.common.aio import run_until_signal
 from services.common.bus import Bus
 from services.common.errors import ConfigurationError, RobotError
 from services.common.logs import setup_logging
+from services.common.modes import GripperCommand, TaskKind
 from services.common.net import free_loopback_port
 from services.common.settings import Settings, load_settings
 from services.sim.twin.cli import app as twin_app
@@ -109,7 +110,7 @@ def up(
 def evaluate(
     trials: Annotated[int, typer.Option(min=1, help="number of seeded trials")] = 20,
     seed: Annotated[int, typer.Option(min=0, help="seed of the first scene")] = 0,
-    task: Annotated[str, typer.Option(help="stand-rod | sort-cubes")] = "stand-rod",
+    task: Annotated[str, typer.Option(help="stand-rod | sort-cubes")] = TaskKind.STAND_ROD,
     speed: Annotated[float, typer.Option(help="sim time per wall time")] = 3.0,
     calibration_error_mm: Annotated[float, typer.Option(help="inject this camera position error")] = 0.0,
     calibration_error_deg: Annotated[float, typer.Option(help="inject this camera rotation error")] = 0.0,
@@ -122,7 +123,7 @@ def evaluate(
 
     from services.apps.evaluation import print_report, run_eval, write_report
 
-    if task not in ("stand-rod", "sort-cubes"):
+    if task not in tuple(TaskKind):
         console.print(f"[red]--task must be stand-rod or sort-cubes, not {task!r}[/red]")
         raise typer.Exit(2)
     # a self-contained run: free loopback ports, so it never collides with a running cell
@@ -345,11 +346,11 @@ def robot_gripper(
     """Open or close the gripper."""
     from pickplace.v1 import robot_pb2
 
-    if action not in ("open", "close"):
+    if action not in tuple(GripperCommand):
         console.print(f"[red]gripper action must be open or close, not {action!r}[/red]")
         raise typer.Exit(2)
     s = _settings(profile, config, console_log=False)
-    r = _run(_robot_call(s, "SetGripper", robot_pb2.SetGripperRequest(close=action == "close")))
+    r = _run(_robot_call(s, "SetGripper", robot_pb2.SetGripperRequest(close=action == GripperCommand.CLOSE)))
     console.print(r.message)
 
 

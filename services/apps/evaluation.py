@@ -23,6 +23,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from services.apps.cell import Cell
+from services.common.modes import TaskKind
 from services.common.settings import Settings
 from services.task.states import CycleState
 
@@ -123,7 +124,7 @@ async def run_eval(
     settings: Settings,
     trials: int,
     seed: int,
-    task: str = "stand-rod",
+    task: str = TaskKind.STAND_ROD,
     calibration_error: tuple[float, float] | None = None,
     console: Console | None = None,
     progress: bool = True,
@@ -145,7 +146,7 @@ async def run_eval(
         tilt_at_release: list[float] = []
 
         def on_state(state: CycleState, _msg: str) -> None:
-            if state is CycleState.RELEASE and task == "stand-rod":
+            if state is CycleState.RELEASE and task == TaskKind.STAND_ROD:
                 tilt_at_release.append(gt.axis_tilt_deg(gt.object_pose(cell.engine, "rod")))
             runner._on_state(state, _msg)
 
@@ -167,7 +168,7 @@ async def run_eval(
                 tilt_at_release.clear()
                 outcome = await runner.run_cycle(task)
                 settled_s = await _settle_until_rest(cell, _placed_object(task, outcome.object_class))
-                if task == "stand-rod":
+                if task == TaskKind.STAND_ROD:
                     check = gt.check_rod_standing(cell.engine)
                     ok, reasons, tilt_after = check.success, list(check.reasons), check.tilt_deg
                 else:
@@ -209,7 +210,7 @@ async def run_eval(
 
 
 def _placed_object(task: str, object_class: str) -> str | None:
-    if task == "stand-rod":
+    if task == TaskKind.STAND_ROD:
         return "rod"
     return object_class if object_class.startswith("cube_") else None
 

@@ -31,6 +31,7 @@ from services.common.errors import (
     PathPlanningTimeoutError,
     TrajectoryLimitError,
 )
+from services.common.modes import MotionKind
 from services.common.settings import MotionSettings
 from services.kinematics.cartesian import cartesian_path
 from services.kinematics.collision import CollisionChecker, Scene
@@ -114,12 +115,12 @@ class Waypoint:
 
     pose: Array | None = None
     joints: Array | None = None
-    motion: str = "joint"
+    motion: MotionKind = MotionKind.JOINT
 
     def __post_init__(self) -> None:
         if (self.pose is None) == (self.joints is None):
             raise InvalidInputError("a waypoint needs exactly one of a pose or joint positions")
-        if self.motion not in ("joint", "linear"):
+        if self.motion not in (MotionKind.JOINT, MotionKind.LINEAR):
             raise InvalidInputError(f"waypoint motion must be 'joint' or 'linear', got {self.motion!r}")
 
 
@@ -223,7 +224,7 @@ class MotionPlanner:
         for k, wp in enumerate(waypoints):
             if not isinstance(wp, Waypoint):
                 raise InvalidInputError(f"waypoint {k} is not a Waypoint: {wp!r}")
-            if wp.motion == "linear":
+            if wp.motion == MotionKind.LINEAR:
                 if wp.pose is not None:
                     target = check_pose(wp.pose, f"waypoint {k} pose")
                 else:

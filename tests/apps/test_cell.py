@@ -13,6 +13,7 @@ from pickplace.v1 import task_pb2
 from services.apps.cell import Cell
 from services.common.bus import Bus
 from services.common.keys import CellKeys
+from services.common.modes import TaskKind
 from services.sim.twin import ground_truth as gt
 from services.task.cycle import Orchestrator
 from services.task.ports import Observation, SeenRod
@@ -34,7 +35,7 @@ async def test_full_pick_and_stand_through_all_services(task_settings):
             picks = watcher.subscribe(keys.pick_events, task_pb2.PickEvent)
             statuses = watcher.subscribe(keys.task_status, task_pb2.TaskStatus)
             await asyncio.sleep(0.3)  # let the second session's subscriptions reach the cell
-            outcome = await cell.task.runner.run_cycle("stand-rod")
+            outcome = await cell.task.runner.run_cycle(TaskKind.STAND_ROD)
             event = await picks.get(timeout_s=5.0)
             seen_states = set()
             while not statuses._queue.empty():
@@ -63,7 +64,7 @@ async def test_no_rod_detect_failed_retries_then_abort(tmp_path):
         orch._on_state = lambda st, msg: states.append(st)
         q0 = await cell.task.clients.robot.joints()
         before = cell.sim.controller.next_id
-        outcome = await orch.run("stand-rod")
+        outcome = await orch.run(TaskKind.STAND_ROD)
         assert not outcome.success
         assert outcome.stage_reached == "DETECT" and "no rod detected" in outcome.failure_reason
         assert states.count(CycleState.DETECT_FAILED) == 3 and states.count(CycleState.RETRY) == 2
@@ -88,7 +89,7 @@ async def test_unreachable_rod_is_a_planning_error_and_nothing_moves(task_settin
         c = cell.task.clients
         orch = Orchestrator(_FarVision(), c.grasp, c.motion, c.robot, cycle_config(cell.settings))
         before = cell.sim.controller.next_id
-        outcome = await orch.run("stand-rod")
+        outcome = await orch.run(TaskKind.STAND_ROD)
         assert not outcome.success and outcome.stage_reached == "PLAN"
         assert outcome.error_code == "IKFailureError"
         assert "reach" in outcome.failure_reason and "1.5" in outcome.failure_reason
@@ -104,7 +105,7 @@ async def test_slipping_grasp_is_detected_and_regrasped(tmp_path, caplog):
         orch = cell.task.runner.orchestrator
         orch._on_state = lambda st, msg: states.append(st)
         with caplog.at_level(logging.WARNING, logger="pickplace.task.cycle"):
-            outcome = await orch.run("stand-rod")
+            outcome = await orch.run(TaskKind.STAND_ROD)
         assert not outcome.success
         # the first grasp: lifted, verification failed, the cycle backed off and looked again
         assert any(

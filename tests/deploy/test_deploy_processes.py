@@ -19,6 +19,7 @@ from services.apps.launcher import Launcher
 from services.apps.topology import SERVICES, LocalPorts, topology
 from services.common.bus import Bus
 from services.common.keys import CellKeys
+from services.common.modes import TaskKind
 from services.common.settings import load_settings
 from services.sim.bus_link import request_scene_reset
 from tests.deploy.promtext import (
@@ -101,7 +102,7 @@ async def test_processes_pick_survive_a_vision_crash_and_keep_every_pick(tmp_pat
                 await asyncio.sleep(0.3)  # let the subscriptions reach the router
 
                 await enable_robot(cs)
-                first = await run_single_cycle(cs, "stand-rod")
+                first = await run_single_cycle(cs, TaskKind.STAND_ROD)
                 assert first.success, first.failure_reason
                 assert first.object_class == "rod"
                 assert await request_scene_reset(watcher, cs.cell_id) == 4  # the rod lies on the table again
@@ -109,7 +110,7 @@ async def test_processes_pick_survive_a_vision_crash_and_keep_every_pick(tmp_pat
                 # second cycle: kill the vision process once the rod has been seen and the arm works
                 while not statuses._queue.empty():
                     statuses._queue.get_nowait()
-                second_call = asyncio.create_task(run_single_cycle(cs, "stand-rod"))
+                second_call = asyncio.create_task(run_single_cycle(cs, TaskKind.STAND_ROD))
                 await wait_for_state(statuses, AFTER_DETECT, timeout_s=120)
                 vision_pid = launcher.children["vision"].pid
                 assert vision_pid is not None
@@ -123,7 +124,7 @@ async def test_processes_pick_survive_a_vision_crash_and_keep_every_pick(tmp_pat
                 if not second.success:  # the operator's part: the arm out of the camera's view
                     await park_arm(cs)
                 await request_scene_reset(watcher, cs.cell_id)
-                third = await run_single_cycle(cs, "stand-rod")
+                third = await run_single_cycle(cs, TaskKind.STAND_ROD)
                 assert third.success, third.failure_reason
 
                 ids = [first.pick_id, second.pick_id, third.pick_id]

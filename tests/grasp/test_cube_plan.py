@@ -7,6 +7,7 @@ import pytest
 
 from services.common.errors import IKFailureError, InvalidInputError
 from services.common.frames import invert_transform
+from services.common.modes import GripperCommand
 from services.common.settings import load_settings
 from services.grasp.collision import MotionCollisionCheck, tool_geometry
 from services.grasp.cube import CubeObservation, drop_zone, plan_pick_and_place
@@ -59,9 +60,9 @@ def test_each_colour_goes_to_its_drop_zone(color: str, seed: int) -> None:
         "RETRACT",
     ]
     assert [(w.name, w.gripper) for w in p.waypoints if w.gripper] == [
-        ("PRE_GRASP", "open"),
-        ("GRASP", "close"),
-        ("RELEASE", "open"),
+        ("PRE_GRASP", GripperCommand.OPEN),
+        ("GRASP", GripperCommand.CLOSE),
+        ("RELEASE", GripperCommand.OPEN),
     ]
     assert p.waypoint("LIFT").T_base_tool[2, 3] >= CFG.cubes.transport_height_m
     for w in p.waypoints:

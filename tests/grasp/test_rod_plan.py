@@ -11,6 +11,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from services.common.errors import CollisionError, IKFailureError, InvalidInputError, PlanningError
 from services.common.frames import invert_transform
+from services.common.modes import GripperCommand, MotionKind
 from services.common.settings import GraspSettings, load_settings
 from services.grasp.collision import MotionCollisionCheck, tool_geometry
 from services.grasp.geometry import pose
@@ -84,14 +85,19 @@ def test_plan_has_the_seed_001_waypoints_and_gripper_commands(plans) -> None:  #
     for _, p in plans:
         assert p.names() == NAMES
         actions = [(w.name, w.gripper) for w in p.waypoints if w.gripper]
-        assert actions == [("PRE_GRASP", "open"), ("GRASP", "close"), ("RELEASE", "open")]
+        assert actions == [
+            ("PRE_GRASP", GripperCommand.OPEN),
+            ("GRASP", GripperCommand.CLOSE),
+            ("RELEASE", GripperCommand.OPEN),
+        ]
+        assert all(type(w.gripper) is GripperCommand for w in p.waypoints if w.gripper)
         motions = {w.name: w.motion for w in p.waypoints}
-        assert motions["SAFE_HOME"] == motions["PRE_GRASP"] == "joint"
+        assert motions["SAFE_HOME"] is motions["PRE_GRASP"] is MotionKind.JOINT
         assert all(
-            motions[n] == "linear"
+            motions[n] is MotionKind.LINEAR
             for n in ("GRASP", "LIFT", "REORIENT", "CARRY", "PLACE_ABOVE", "PLACE", "RETRACT")
         )
-        assert motions["RELEASE"] == "hold"  # open at touch height, do not push down
+        assert motions["RELEASE"] is MotionKind.HOLD  # open at touch height, do not push down
         guarded = [w.name for w in p.waypoints if w.guarded]
         assert guarded == ["PLACE"]
         assert p.waypoint("PLACE").guard.force_drop_n == pytest.approx(0.6)  # type: ignore[union-attr]
@@ -111,7 +117,7 @@ def test_consecutive_linear_waypoints_stay_in_one_ik_branch(plans) -> None:  # t
     for _, p in plans[:3]:
         wps = p.waypoints
         for prev, nxt in itertools.pairwise(wps[1:]):
-            if nxt.motion != "linear":
+            if nxt.motion is not MotionKind.LINEAR:
                 continue
             path = cartesian_path(kin, prev.q, [nxt.T_base_tool], step_m=0.005, step_rad=math.radians(2.0))
             assert np.allclose(path[-1], nxt.q, atol=1e-4), f"{prev.name} → {nxt.name} changes IK branch"

@@ -12,6 +12,7 @@ import pytest
 
 from services.common.errors import CollisionError, IKFailureError, InvalidInputError, PathPlanningTimeoutError
 from services.common.frames import make_transform
+from services.common.modes import MotionKind
 from services.kinematics.collision import AttachedObject, Box, CollisionChecker, Scene
 from services.kinematics.model import load_arm
 from services.kinematics.trajectory import JointLimits, JointTrajectory, verify_trajectory
@@ -140,10 +141,10 @@ def test_waypoint_plan_with_joint_and_linear_moves(arm):
     at_pick[2, 3] -= 0.05
     above_place = planner.kin.fk(Q_PLACE)
     waypoints = [
-        Waypoint(pose=at_pick, motion="linear"),
-        Waypoint(pose=above_pick, motion="linear"),
-        Waypoint(joints=Q_PLACE, motion="joint"),
-        Waypoint(pose=above_place, motion="joint"),
+        Waypoint(pose=at_pick, motion=MotionKind.LINEAR),
+        Waypoint(pose=above_pick, motion=MotionKind.LINEAR),
+        Waypoint(joints=Q_PLACE, motion=MotionKind.JOINT),
+        Waypoint(pose=above_place, motion=MotionKind.JOINT),
     ]
     plan = planner.plan_waypoints(Q_PICK, waypoints)
     assert plan.planner.split("+")[:2] == ["cartesian", "cartesian"]

@@ -2,17 +2,16 @@
 
 from __future__ import annotations
 
-from typing import Literal
-
 from pydantic import Field
 
+from services.common.modes import TaskKind
 from services.common.settings.base import Model
 
 
 class TaskSettings(Model):
     """The task orchestrator: which job, retries (LLD §15.2) and per-state deadlines."""
 
-    task: Literal["stand-rod", "sort-cubes"] = "stand-rod"
+    task: TaskKind = TaskKind.STAND_ROD
     detect_retries: int = Field(4, ge=0, le=20)  # waits 0.5, 1, 2, 4 s (doubling)
     detect_retry_delay_s: float = Field(0.5, ge=0, le=30)
     grasp_alternatives: int = Field(
