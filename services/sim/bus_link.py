@@ -24,9 +24,10 @@ from typing import Any
 from services.common.bus import Bus
 from services.common.errors import InvalidInputError, RobotCommunicationError
 from services.common.keys import CellKeys
-from services.common.live_config import LiveConfig, with_twin
-from services.common.sensors import RGBDFrame
+from services.common.live_config import with_twin
+from services.common.sensors import CameraIntrinsics, RGBDFrame
 from services.common.settings import Settings
+from services.common.shell import ServiceShell, ShellStateError
 from services.sim.dobot_server import SimDobotServer
 
 log = logging.getLogger("pickplace.sim.bus")
@@ -49,6 +50,11 @@ class CurrentCamera:
         with self._lock:
             old, self._camera = self._camera, camera
         return old
+
+    @property
+    def intrinsics(self) -> CameraIntrinsics:
+        with self._lock:
+            return self._camera.intrinsics
 
     def capture(self) -> RGBDFrame:
         with self._lock:
@@ -75,8 +81,10 @@ def parse_seed(payload: bytes, current: int) -> int:
     return seed
 
 
-class SimBusLink:
+class SimBusLink(ServiceShell):
     """Camera frames out, scene resets in, for one running :class:`SimDobotServer` with the twin engine."""
+
+    kind = "sim-bus"
 
     def __init__(
         self,
@@ -86,6 +94,7 @@ class SimBusLink:
         frames: bool = True,
         frame_rate: float | None = None,
     ):
+        super().__init__()
         self.settings = settings
         self.frame_rate = frame_rate or settings.vision.rate_hz
         self.server = server
@@ -94,68 +103,60 @@ class SimBusLink:
         self.seed = settings.sim.seed
         self.camera: CurrentCamera | None = None
         self.resets = 0
-        self._stop = asyncio.Event()
-        self._loop = asyncio.get_running_loop()
-        self._tasks: list[asyncio.Task[Any]] = []
-        self._queryable: Any = None
+        self._loop: asyncio.AbstractEventLoop | None = None
         self._reset_lock = asyncio.Lock()
-        self._live: LiveConfig | None = None
 
-    async def __aenter__(self) -> SimBusLink:
+    async def _start(self, stack: contextlib.AsyncExitStack) -> None:
         from services.common.sensors import publish_camera_frames
         from services.sim.twin.camera import TwinCamera
 
+        self._loop = asyncio.get_running_loop()
         keys = CellKeys(self.settings.cell_id)
         if self.frames:
             cam = await asyncio.to_thread(TwinCamera, self.server.controller.engine, self.seed)
             self.camera = CurrentCamera(cam)
-            self._tasks.append(
-                asyncio.create_task(
-                    publish_camera_frames(
-                        self.camera, self.bus, keys.camera_frames, self.frame_rate, self._stop
-                    ),  # type: ignore[arg-type]
-                    name="sim.frames",
-                )
+            stack.push_async_callback(asyncio.to_thread, self.camera.close)
+            # runs until the shell cancels it (the event is for callers that stop it themselves)
+            self.spawn(
+                publish_camera_frames(
+                    self.camera, self.bus, keys.camera_frames, self.frame_rate, asyncio.Event()
+                ),
+                "frames",
             )
-        self._queryable = self.bus.session.declare_queryable(
-            scene_reset_key(self.settings.cell_id), self._on_query
-        )
-        self._live = LiveConfig(self.bus, self.settings, self._on_config).start()
+        queryable = self.bus.session.declare_queryable(scene_reset_key(self.settings.cell_id), self._on_query)
+        stack.callback(self._undeclare, queryable)
+        self.follow_config(self.bus, self.settings, self._on_config)
         log.info(
             "sim on zenoh: frames %s on %s, scene reset on %s",
             "published" if self.frames else "off",
             keys.camera_frames,
             scene_reset_key(self.settings.cell_id),
         )
-        return self
+
+    @staticmethod
+    def _undeclare(queryable: Any) -> None:
+        with contextlib.suppress(Exception):  # the session may be closing already
+            queryable.undeclare()
 
     async def _on_config(self, new: Settings, changed: list[str]) -> None:
         """PUT /config: a changed scene layout is laid out at the next scene reset."""
         self.settings = with_twin(self.settings, new)
 
-    async def __aexit__(self, *exc: object) -> None:
-        self._stop.set()
-        if self._live is not None:
-            await self._live.stop()
-        if self._queryable is not None:
-            with contextlib.suppress(Exception):
-                self._queryable.undeclare()
-        for t in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await asyncio.wait_for(t, 5.0)
-        if self.camera is not None:
-            await asyncio.to_thread(self.camera.close)
-
     # ------------------------------------------------------------------ scene reset
     def _on_query(self, query: Any) -> None:
         """Zenoh thread: hand the query to the event loop (the query is answered from there)."""
         payload = query.payload.to_bytes() if query.payload is not None else b""
-        with contextlib.suppress(RuntimeError):
-            self._loop.call_soon_threadsafe(
-                lambda: self._tasks.append(
-                    asyncio.create_task(self._answer(query, payload), name="sim.reset")
-                )
-            )
+        loop = self._loop
+        if loop is not None:
+            with contextlib.suppress(RuntimeError):  # the loop has closed: the query times out
+                loop.call_soon_threadsafe(self._start_answer, query, payload)
+
+    def _start_answer(self, query: Any, payload: bytes) -> None:
+        try:
+            self.spawn(self._answer(query, payload), "reset")
+        except ShellStateError as exc:  # stopping: the caller hears why at once
+            query.reply_err(json.dumps({"error": str(exc)}).encode())
+            query.drop()
 
     async def _answer(self, query: Any, payload: bytes) -> None:
         try:

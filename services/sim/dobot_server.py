@@ -13,7 +13,9 @@ import contextlib
 import logging
 import threading
 import time
+from collections.abc import Awaitable, Callable
 
+from services.common.shell import ServiceShell
 from services.dobot import CommandFramer
 from services.sim.controller import SimController
 
@@ -22,7 +24,11 @@ log = logging.getLogger("pickplace.sim.server")
 MAX_BACKLOG_BYTES = 1440 * 256  # drop packets for a client that stops reading
 
 
-class SimDobotServer:
+class SimDobotServer(ServiceShell):
+    """The simulated controller's sockets and clock, as a shell: ``async with build_sim_server(s) as sim``."""
+
+    kind = "sim-dobot"
+
     def __init__(
         self,
         controller: SimController,
@@ -34,6 +40,7 @@ class SimDobotServer:
         slow_period_s: float = 0.2,
         speed: float = 1.0,
     ):
+        super().__init__()
         self.controller = controller
         self.host = host
         self._ports = {"dashboard": dashboard_port, "feedback": feedback_port, "slow": slow_feedback_port}
@@ -51,17 +58,10 @@ class SimDobotServer:
         self.ticks = 0
         self.ports: dict[str, int] = {}
 
-    async def __aenter__(self) -> SimDobotServer:
-        await self.start()
-        return self
-
-    async def __aexit__(self, *exc: object) -> None:
-        await self.stop()
-
-    async def start(self) -> None:
-        if self._loop is not None:
-            raise RuntimeError("server already started")
+    async def _start(self, stack: contextlib.AsyncExitStack) -> None:
         self._loop = asyncio.get_running_loop()
+        stack.callback(self.controller.engine.close)
+        stack.push_async_callback(self._close_listeners)
         self._servers["dashboard"] = await asyncio.start_server(
             self._serve_dashboard, self.host, self._ports["dashboard"]
         )
@@ -76,13 +76,25 @@ class SimDobotServer:
         self._stop.clear()
         self._thread = threading.Thread(target=self._clock, name="sim-dobot-clock", daemon=True)
         self._thread.start()
+        stack.push_async_callback(self._stop_clock)
         log.info("simulated Dobot listening on %s: %s", self.host, self.ports)
 
     async def stop(self) -> None:
+        """Switch the controller off now (clock stopped, listeners closed, clients dropped); leaving
+        the ``async with`` afterwards does nothing more."""
+        await self.__aexit__(None, None, None)
+
+    def links(self) -> dict[str, bool]:
+        clock = self._thread is not None and self._thread.is_alive()
+        return {"clock": clock, **{name: srv.is_serving() for name, srv in self._servers.items()}}
+
+    async def _stop_clock(self) -> None:
         self._stop.set()
         if self._thread is not None:
             await asyncio.to_thread(self._thread.join, 2.0)
             self._thread = None
+
+    async def _close_listeners(self) -> None:
         for srv in self._servers.values():
             srv.close()
         self.drop_clients()
@@ -91,7 +103,6 @@ class SimDobotServer:
                 await asyncio.wait_for(srv.wait_closed(), 2.0)
         self._servers.clear()
         self._loop = None
-        self.controller.engine.close()
 
     def drop_clients(self) -> None:
         """Close every client connection (as if the cable were pulled); listeners stay up."""
@@ -141,7 +152,9 @@ class SimDobotServer:
                 w.write(packet)
 
     # ------------------------------------------------------------------ sockets
-    def _make_feed_handler(self, group: set[asyncio.StreamWriter]):  # type: ignore[no-untyped-def]
+    def _make_feed_handler(
+        self, group: set[asyncio.StreamWriter]
+    ) -> Callable[[asyncio.StreamReader, asyncio.StreamWriter], Awaitable[None]]:
         async def handler(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
             group.add(writer)
             try:

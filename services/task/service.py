@@ -11,17 +11,18 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Coroutine, Iterator
+from typing import Any, Protocol
 
 import grpc
 import numpy as np
 from pickplace.v1 import common_pb2, task_pb2, task_pb2_grpc
 
-from services.common import grpc_util
 from services.common.bus import Bus
 from services.common.errors import InvalidInputError, SafetyError
 from services.common.keys import CellKeys
 from services.common.settings import Settings
+from services.common.shell import GrpcShell, ShellStateError
 from services.task.clients import CellClients
 from services.task.cycle import CycleConfig, Orchestrator
 from services.task.messages import pick_event_msg
@@ -31,6 +32,12 @@ from services.task.states import CycleState, PickOutcome, StateDeadlines, TaskCo
 log = logging.getLogger("pickplace.task.service")
 
 TASKS = ("stand-rod", "sort-cubes")
+
+
+class Spawn(Protocol):
+    """Runs a coroutine in the owner's task group (:meth:`ServiceShell.spawn`)."""
+
+    def __call__(self, coro: Coroutine[Any, Any, None], name: str) -> asyncio.Task[None]: ...
 
 
 def cycle_config(settings: Settings) -> CycleConfig:
@@ -64,6 +71,7 @@ class TaskRunner:
         clients: CellClients,
         bus: Bus | None = None,
         between_cycles: Callable[[], object] | None = None,
+        spawn: Spawn | None = None,
     ):
         self.settings = settings
         self.clients = clients
@@ -79,6 +87,7 @@ class TaskRunner:
         self.listeners: list[Callable[[PickOutcome], None]] = []
         self.between_cycles = between_cycles  # e.g. lay a new rod in the twin
         self._status_queues: set[asyncio.Queue[task_pb2.TaskStatus]] = set()
+        self._spawn = spawn  # the task service's task group runs the cycle loop
         self._loop_task: asyncio.Task[None] | None = None
         self._seq = 0
         self.orchestrator = Orchestrator(
@@ -131,7 +140,7 @@ class TaskRunner:
         self.publish_status()
 
     @contextlib.contextmanager
-    def status_subscription(self):  # type: ignore[no-untyped-def]
+    def status_subscription(self) -> Iterator[asyncio.Queue[task_pb2.TaskStatus]]:
         q: asyncio.Queue[task_pb2.TaskStatus] = asyncio.Queue(64)
         self._status_queues.add(q)
         try:
@@ -186,6 +195,10 @@ class TaskRunner:
         except asyncio.CancelledError:
             self._on_state(CycleState.STOPPED, "stopped by the operator")
             raise
+        except Exception as exc:  # the loop's boundary: a bug ends the loop, not the service; say so
+            log.exception("task loop failed")
+            self.last_error = f"{type(exc).__name__}: {exc}"
+            self._on_state(CycleState.IDLE, f"task loop failed: {self.last_error}")
 
     def start(self, task: str | None = None, cycles: int = 0) -> None:
         if self.running:
@@ -194,20 +207,26 @@ class TaskRunner:
             if task not in TASKS:
                 raise InvalidInputError(f"unknown task {task!r}; choose one of {list(TASKS)}")
             self.task = task
-        self._loop_task = asyncio.create_task(self._loop(cycles), name="task.loop")
+        if self._spawn is None:
+            raise ShellStateError("the task runner runs cycles only inside a running task service")
+        self._loop_task = self._spawn(self._loop(cycles), "loop")
 
     async def wait(self) -> None:
         if self._loop_task is not None:
             with contextlib.suppress(asyncio.CancelledError):
                 await self._loop_task
 
-    async def stop(self) -> None:
-        """Stop the loop and the arm now (the current cycle is abandoned, the arm held)."""
+    async def cancel_loop(self) -> None:
+        """End the cycle loop (if it runs) and wait until it has reported STOPPED."""
         task, self._loop_task = self._loop_task, None
         if task is not None and not task.done():
             task.cancel()
-            with contextlib.suppress(asyncio.CancelledError, Exception):
+            with contextlib.suppress(asyncio.CancelledError):
                 await task
+
+    async def stop(self) -> None:
+        """Stop the loop and the arm now (the current cycle is abandoned, the arm held)."""
+        await self.cancel_loop()
         await self.clients.robot.stop()
 
     async def emergency_stop(self) -> None:
@@ -215,11 +234,7 @@ class TaskRunner:
         try:
             await self.clients.robot.emergency_stop()
         finally:
-            task, self._loop_task = self._loop_task, None
-            if task is not None and not task.done():
-                task.cancel()
-                with contextlib.suppress(asyncio.CancelledError, Exception):
-                    await task
+            await self.cancel_loop()
             self.last_error = "emergency stop"
             self._on_state(CycleState.ESTOP, "emergency stop pressed; release, clear and start again")
 
@@ -228,37 +243,53 @@ class TaskControllerServicer(task_pb2_grpc.TaskControllerServicer):
     def __init__(self, runner: TaskRunner):
         self.runner = runner
 
-    async def Start(self, request, context):  # type: ignore[no-untyped-def]
+    async def Start(
+        self, request: task_pb2.StartTaskRequest, context: grpc.aio.ServicerContext
+    ) -> common_pb2.CommandResponse:
         if request.cycles < 0:
             raise InvalidInputError(f"cycles must be >= 0, got {request.cycles}")
         self.runner.start(request.task or None, request.cycles)
         return common_pb2.CommandResponse(success=True, message=f"started {self.runner.task}")
 
-    async def Stop(self, request, context):  # type: ignore[no-untyped-def]
+    async def Stop(
+        self, request: task_pb2.StopTaskRequest, context: grpc.aio.ServicerContext
+    ) -> common_pb2.CommandResponse:
         await self.runner.stop()
         return common_pb2.CommandResponse(success=True, message="stopped")
 
-    async def EmergencyStop(self, request, context):  # type: ignore[no-untyped-def]
+    async def EmergencyStop(
+        self, request: task_pb2.TaskEmergencyStopRequest, context: grpc.aio.ServicerContext
+    ) -> common_pb2.CommandResponse:
         await self.runner.emergency_stop()
         return common_pb2.CommandResponse(success=True, message="emergency stop pressed")
 
-    async def RunSingleCycle(self, request, context):  # type: ignore[no-untyped-def]
+    async def RunSingleCycle(
+        self, request: task_pb2.SingleCycleRequest, context: grpc.aio.ServicerContext
+    ) -> task_pb2.PickEvent:
         if self.runner.running:
             raise InvalidInputError("the task loop is running; stop it before a single cycle")
         outcome = await self.runner.run_cycle(request.task or None)
         return pick_event_msg(outcome, self.runner.settings.cell_id)
 
-    async def GetStatus(self, request, context):  # type: ignore[no-untyped-def]
+    async def GetStatus(
+        self, request: task_pb2.GetTaskStatusRequest, context: grpc.aio.ServicerContext
+    ) -> task_pb2.TaskStatus:
         return self.runner.status()
 
-    async def StreamStatus(self, request, context) -> AsyncIterator[task_pb2.TaskStatus]:  # type: ignore[no-untyped-def]
+    async def StreamStatus(
+        self, request: task_pb2.GetTaskStatusRequest, context: grpc.aio.ServicerContext
+    ) -> AsyncIterator[task_pb2.TaskStatus]:
         with self.runner.status_subscription() as q:
             yield self.runner.status()
             while True:
                 yield await q.get()
 
 
-class TaskService:
+class TaskService(GrpcShell):
+    """The TaskController server, the status ticker and the cycle loop, in one task group."""
+
+    kind = "task"
+
     def __init__(
         self,
         settings: Settings,
@@ -266,21 +297,21 @@ class TaskService:
         grpc_port: int | None = None,
         clients: CellClients | None = None,
     ):
+        super().__init__(settings.grpc.host, settings.grpc.task_port if grpc_port is None else grpc_port)
         self.settings = settings
         self.clients = clients or CellClients(settings)
-        self.runner = TaskRunner(settings, self.clients, bus)
-        self.grpc_port = settings.grpc.task_port if grpc_port is None else grpc_port
-        self.server: grpc.aio.Server | None = None
-        self._ticker: asyncio.Task[None] | None = None
+        self.runner = TaskRunner(settings, self.clients, bus, spawn=self.spawn)
 
-    async def start(self) -> int:
-        self.server = grpc_util.create_server()
-        task_pb2_grpc.add_TaskControllerServicer_to_server(TaskControllerServicer(self.runner), self.server)
-        self.grpc_port = grpc_util.bind(self.server, self.settings.grpc.host, self.grpc_port)
-        await self.server.start()
-        self._ticker = asyncio.create_task(self._tick(), name="task.status")
-        log.info("task service on %s:%d", self.settings.grpc.host, self.grpc_port)
-        return self.grpc_port
+    async def _start(self, stack: contextlib.AsyncExitStack) -> None:
+        stack.push_async_callback(self.clients.close)
+        await self._serve_grpc(
+            stack,
+            lambda server: task_pb2_grpc.add_TaskControllerServicer_to_server(
+                TaskControllerServicer(self.runner), server
+            ),
+            "TaskController",
+        )
+        self.spawn(self._tick(), "status")
 
     async def _tick(self) -> None:
         period = 1.0 / self.settings.task.status_rate_hz
@@ -288,32 +319,10 @@ class TaskService:
             await asyncio.sleep(period)
             self.runner.publish_status()
 
-    async def stop(self) -> None:
-        if self._ticker is not None:
-            self._ticker.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._ticker
-        task = self.runner._loop_task
-        if task is not None and not task.done():
-            task.cancel()
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await task
-        if self.server is not None:
-            await self.server.stop(grace=0.5)
-        await self.clients.close()
-
-    async def __aenter__(self) -> TaskService:
-        await self.start()
-        return self
-
-    async def __aexit__(self, *exc: object) -> None:
-        await self.stop()
-
 
 async def serve(settings: Settings, between_cycles: Callable[[Bus], object] | None = None) -> None:
     """``pickplace serve task``; ``between_cycles(bus)`` (from the composition root) runs after each cycle."""
     async with Bus(settings.zenoh) as bus, TaskService(settings, bus) as svc:
-        assert svc.server is not None
         if between_cycles is not None:
             svc.runner.between_cycles = lambda: between_cycles(bus)
-        await svc.server.wait_for_termination()
+        await svc.wait()

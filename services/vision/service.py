@@ -161,10 +161,11 @@ class VisionService(GrpcShell):
             stack.push_async_callback(self._close_own_camera)
         if self.camera is None and self.bus is not None:
             loop = asyncio.get_running_loop()
-            self._subscription = self.bus.subscribe_callback(
-                self.keys.camera_frames,
-                lambda _k, payload: loop.call_soon_threadsafe(self._on_bus_frame, payload),
-            )
+
+            def on_frame(_key: str, payload: bytes) -> None:  # a Zenoh thread: over to the event loop
+                loop.call_soon_threadsafe(self._on_bus_frame, payload)
+
+            self._subscription = self.bus.subscribe_callback(self.keys.camera_frames, on_frame)
             stack.callback(self._undeclare_subscription)
         await self._serve_grpc(
             stack,
