@@ -9,14 +9,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import logging
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
-from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
 
 from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
@@ -37,6 +34,7 @@ from gateway.live import LiveHub
 from gateway.persist import PickBuffer, PickWriter, WrittenPick
 from gateway.records import pick_json
 from gateway.security import BodySizeLimit, SecurityHeaders
+from gateway.state import Cell
 from services.common.bus import Bus
 from services.common.errors import ConfigurationError, InvalidInputError, RobotError
 from services.common.keys import CellKeys
@@ -52,59 +50,6 @@ CONFIG_REPUBLISH_S = 5.0  # how soon a restarted service catches up with PUT /co
 def repo_path(path: str) -> Path:
     p = Path(path)
     return p if p.is_absolute() else REPO_ROOT / p
-
-
-@dataclass
-class Cell:
-    """What the running gateway holds; one per app, reached through ``request.app.state.cell``."""
-
-    settings: Settings
-    engine: AsyncEngine
-    sessions: async_sessionmaker[AsyncSession]
-    database_display: str
-    hub: LiveHub
-    writer: PickWriter
-    clients: CellClients
-    metrics: CellMetrics
-    calibration: CalibrationRuns
-    cache: ReadCache
-    started_monotonic: float = field(default_factory=time.monotonic)
-    task_status_at: float | None = None
-    health: dict[str, Any] | None = None
-    ready: asyncio.Event = field(default_factory=asyncio.Event)
-    edge_port: int | None = None
-    bus: Bus | None = None
-    config_patch: dict[str, Any] = field(default_factory=dict)  # every change PUT /config accepted
-    _background: set[asyncio.Task[Any]] = field(default_factory=set)
-
-    def spawn(self, coro: Any, name: str) -> asyncio.Task[Any]:
-        """A short background job whose reference is kept until it ends."""
-        task = asyncio.create_task(coro, name=name)
-        self._background.add(task)
-        task.add_done_callback(self._background.discard)
-        return task
-
-    def publish_config(self, updated: list[str]) -> None:
-        """Send the accepted changes to the services (they apply them to their own settings)."""
-        if self.bus is None or not self.config_patch:
-            return
-        msg = common_pb2.ConfigUpdate(
-            header=common_pb2.Header(stamp_ns=time.time_ns()),
-            patch_json=json.dumps(self.config_patch, sort_keys=True),
-            updated=updated,
-        )
-        try:
-            self.bus.publish(CellKeys(self.settings.cell_id).config_updates, msg)
-        except Exception as exc:  # the next periodic publication tries again
-            log.warning("configuration update not published: %s", exc)
-
-    @property
-    def uptime_s(self) -> float:
-        return time.monotonic() - self.started_monotonic
-
-    @property
-    def robot_id(self) -> str:
-        return self.settings.gateway.robot_id
 
 
 async def _prepare_database(settings: Settings) -> tuple[AsyncEngine, str]:
@@ -137,11 +82,6 @@ def _insert_fn(
         return new
 
     return insert
-
-
-def _log_crash(task: asyncio.Task[Any]) -> None:
-    if not task.cancelled() and task.exception() is not None:
-        log.error("background task %s died: %r", task.get_name(), task.exception(), exc_info=task.exception())
 
 
 async def _poll_robot_status(cell: Cell) -> None:
@@ -237,7 +177,6 @@ def create_app(
         )
         own_bus = bus is None
         the_bus = bus if bus is not None else Bus(settings.zenoh)
-        tasks: list[asyncio.Task[Any]] = []
         feeds: BusFeeds | None = None
         async with contextlib.AsyncExitStack() as stack:
             stack.push_async_callback(engine.dispose)
@@ -288,25 +227,19 @@ def create_app(
             cell.bus = the_bus
 
             if gw.edge_grpc_port is not None:
-                from gateway.edge import start_edge
+                from gateway.edge import EdgeServer
+                from gateway.routers.system import cell_state
 
-                edge, cell.edge_port = await start_edge(cell, gw.host, gw.edge_grpc_port, app.state.api_token)
-                stack.push_async_callback(edge.stop, 0.5)
+                edge = EdgeServer(
+                    cell, gw.host, gw.edge_grpc_port, app.state.api_token, lambda: cell_state(cell)
+                )
+                cell.edge_port = (await stack.enter_async_context(edge)).grpc_port
 
-            for name, coro in (
-                ("gateway-pick-writer", writer.run()),
-                ("gateway-robot-status", _poll_robot_status(cell)),
-                ("gateway-health", _sample_health(cell)),
-                ("gateway-config", _republish_config(cell)),
-            ):
-                t = asyncio.create_task(coro, name=name)
-                t.add_done_callback(_log_crash)
-                tasks.append(t)
+            # the gateway's background work: one task group, its jobs cancelled before anything closes
+            cell.tasks = await stack.enter_async_context(asyncio.TaskGroup())
 
             async def stop_tasks() -> None:
-                for t in tasks:
-                    t.cancel()
-                await asyncio.gather(*tasks, return_exceptions=True)
+                await cell.stop_jobs()
                 # last chance to write what is buffered, then keep the rest on disk for the next start
                 if len(buffer):
                     with contextlib.suppress(Exception):
@@ -316,6 +249,13 @@ def create_app(
                         log.warning("%d pick event(s) kept in %s for the next start", n, buffer.spill_path)
 
             stack.push_async_callback(stop_tasks)
+            for name, coro in (
+                ("gateway-pick-writer", writer.run()),
+                ("gateway-robot-status", _poll_robot_status(cell)),
+                ("gateway-health", _sample_health(cell)),
+                ("gateway-config", _republish_config(cell)),
+            ):
+                cell.spawn(coro, name)
             log.info("gateway ready: database %s, cell %s", display, settings.cell_id)
             cell.ready.set()
             app.state.ready.set()

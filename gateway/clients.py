@@ -7,7 +7,6 @@ effort, without the e-stop waiting for it.
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import logging
 from collections.abc import Callable
@@ -17,9 +16,10 @@ import grpc
 import grpc.aio
 from pickplace.v1 import common_pb2, robot_pb2, robot_pb2_grpc, task_pb2, task_pb2_grpc
 
-from services.common.errors import RobotCommunicationError, RobotError
+from services.common.errors import RobotCommunicationError
 from services.common.grpc_util import translate
 from services.common.settings import Settings
+from services.common.shell import ServiceShell
 
 log = logging.getLogger("pickplace.gateway.clients")
 
@@ -61,10 +61,13 @@ def _relay_errors(
         raise err from exc
 
 
-class CellClients:
-    """Channels and stubs; an async context manager."""
+class CellClients(ServiceShell):
+    """Channels and stubs, as a shell: the e-stop's task-service notification runs in its task group."""
+
+    kind = "gateway-clients"
 
     def __init__(self, settings: Settings):
+        super().__init__()
         g = settings.grpc
         self.timeout_s = settings.gateway.rpc_timeout_s
         self.estop_timeout_s = settings.gateway.estop_timeout_s
@@ -74,13 +77,15 @@ class CellClients:
         self._task_port = g.task_port
         self._robot_port = g.robot_port
         self._channels: list[grpc.aio.Channel] = []
-        self._background: set[asyncio.Task[Any]] = set()
         self.task: task_pb2_grpc.TaskControllerStub | None = None
         self.robot: robot_pb2_grpc.RobotControllerStub | None = None
         self.estop_robot: robot_pb2_grpc.RobotControllerStub | None = None
         self.estop_task: task_pb2_grpc.TaskControllerStub | None = None
 
-    async def __aenter__(self) -> CellClients:
+    async def _start(self, stack: contextlib.AsyncExitStack) -> None:
+        # a task-service notification still waiting at shutdown is moot: the shell cancels it first
+        stack.push_async_callback(self._close_channels)
+
         def open_(host: str, port: int) -> grpc.aio.Channel:
             ch = open_channel(host, port)
             self._channels.append(ch)
@@ -95,12 +100,8 @@ class CellClients:
         self.estop_task = task_pb2_grpc.TaskControllerStub(open_(self._task_host, self._task_port))
         # connect the e-stop channel now, so the first e-stop does not pay the TCP/HTTP2 handshake
         self.estop_channel.get_state(try_to_connect=True)
-        return self
 
-    async def __aexit__(self, *exc: object) -> None:
-        for t in list(self._background):
-            t.cancel()  # a task-service notification still waiting is moot at shutdown
-        await asyncio.gather(*self._background, return_exceptions=True)
+    async def _close_channels(self) -> None:
         for ch in self._channels:
             await ch.close()
         self._channels.clear()
@@ -138,11 +139,7 @@ class CellClients:
     ) -> common_pb2.CommandResponse:
         """Press the e-stop on the robot driver; tell the task service in the background."""
         assert self.estop_robot is not None
-        notify = asyncio.create_task(
-            self._notify_task_estop(on_task_result), name="gateway-estop-task-notify"
-        )
-        self._background.add(notify)
-        notify.add_done_callback(self._background.discard)
+        self.spawn(self._notify_task_estop(on_task_result), "estop-task-notify")
         # wait_for_ready: a channel still backing off after a driver restart waits (up to the timeout)
         # for the reconnection instead of failing at once
         with _relay_errors("robot driver", self.robot_target, self.estop_channel, self.estop_timeout_s):
@@ -158,7 +155,7 @@ class CellClients:
                     task_pb2.TaskEmergencyStopRequest(), timeout=self.timeout_s, wait_for_ready=True
                 )
             result = "task service notified"
-        except RobotError as exc:
+        except Exception as exc:  # best effort, the job's boundary: the e-stop itself went on its own channel
             result = f"task service not notified: {exc}"
             log.info(result)
         if on_result is not None:

@@ -10,22 +10,25 @@ Errors from the driver pass through with their status code and pickplace error t
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from datetime import UTC, datetime
-from typing import TYPE_CHECKING, Any
+from typing import Any, NoReturn, TypeVar
 
 import grpc
 import grpc.aio
-from pickplace.v1 import common_pb2, gateway_pb2, gateway_pb2_grpc, robot_pb2_grpc
+from google.protobuf.message import Message
+from pickplace.v1 import common_pb2, gateway_pb2, gateway_pb2_grpc, robot_pb2, robot_pb2_grpc
 
 from gateway.db.repository import PickRepository
 from gateway.security import bearer_from_header, token_matches
+from gateway.state import Cell
 from services.common import grpc_util
+from services.common.shell import GrpcShell
 
-if TYPE_CHECKING:
-    from gateway.app import Cell
+R = TypeVar("R")
 
 log = logging.getLogger("pickplace.gateway.edge")
 
@@ -36,11 +39,11 @@ class TokenAuthInterceptor(grpc.aio.ServerInterceptor):
 
     async def intercept_service(
         self,
-        continuation: Callable[[grpc.HandlerCallDetails], Awaitable[grpc.RpcMethodHandler]],
+        continuation: Callable[[grpc.HandlerCallDetails], Awaitable[grpc.RpcMethodHandler[Any, Any] | None]],
         details: grpc.HandlerCallDetails,
-    ) -> grpc.RpcMethodHandler:
+    ) -> grpc.RpcMethodHandler[Any, Any] | None:
         handler = await continuation(details)
-        metadata = {k: v for k, v in (details.invocation_metadata or ())}
+        metadata = {k: str(v) for k, v in (details.invocation_metadata or ())}
         presented = bearer_from_header(metadata.get("authorization"))
         if handler is None or token_matches(presented, self._token):
             return handler
@@ -66,7 +69,7 @@ class TokenAuthInterceptor(grpc.aio.ServerInterceptor):
         )
 
 
-async def _passthrough(context: grpc.aio.ServicerContext, exc: grpc.aio.AioRpcError) -> None:
+async def _passthrough(context: grpc.aio.ServicerContext, exc: grpc.aio.AioRpcError) -> NoReturn:
     md = exc.trailing_metadata() or ()
     kind = next((v for k, v in md if k == grpc_util.ERROR_TYPE_KEY), None)
     if kind is not None:
@@ -85,54 +88,85 @@ class RobotControllerRelay(robot_pb2_grpc.RobotControllerServicer):
         remaining = context.time_remaining()
         return min(remaining, self._max_timeout_s) if remaining is not None else self._max_timeout_s
 
-    async def _unary(
-        self, name: str, request: Any, context: grpc.aio.ServicerContext, estop: bool = False
-    ) -> Any:
+    def _stub(self, estop: bool = False) -> robot_pb2_grpc.RobotControllerStub:
         clients = self._cell.clients
         stub = clients.estop_robot if estop else clients.robot
+        assert stub is not None, "the gateway's clients are open while the edge serves"
+        return stub
+
+    async def _relay(
+        self,
+        method: Callable[..., Awaitable[R]],
+        request: Message,
+        context: grpc.aio.ServicerContext,
+        estop: bool = False,
+    ) -> R:
         try:
-            return await getattr(stub, name)(request, timeout=self._timeout(context), wait_for_ready=estop)
+            return await method(request, timeout=self._timeout(context), wait_for_ready=estop)
         except grpc.aio.AioRpcError as exc:
             await _passthrough(context, exc)
 
-    async def GetJointStates(self, request, context):  # type: ignore[no-untyped-def]
-        return await self._unary("GetJointStates", request, context)
+    async def GetJointStates(
+        self, request: robot_pb2.GetJointStatesRequest, context: grpc.aio.ServicerContext
+    ) -> common_pb2.JointState:
+        return await self._relay(self._stub().GetJointStates, request, context)
 
-    async def GetStatus(self, request, context):  # type: ignore[no-untyped-def]
-        return await self._unary("GetStatus", request, context)
+    async def GetStatus(
+        self, request: robot_pb2.GetStatusRequest, context: grpc.aio.ServicerContext
+    ) -> robot_pb2.RobotStatus:
+        return await self._relay(self._stub().GetStatus, request, context)
 
-    async def MoveJoints(self, request, context):  # type: ignore[no-untyped-def]
-        return await self._unary("MoveJoints", request, context)
+    async def MoveJoints(
+        self, request: robot_pb2.MoveJointsRequest, context: grpc.aio.ServicerContext
+    ) -> robot_pb2.MoveResponse:
+        return await self._relay(self._stub().MoveJoints, request, context)
 
-    async def ExecuteTrajectory(self, request, context):  # type: ignore[no-untyped-def]
-        return await self._unary("ExecuteTrajectory", request, context)
+    async def ExecuteTrajectory(
+        self, request: robot_pb2.ExecuteTrajectoryRequest, context: grpc.aio.ServicerContext
+    ) -> robot_pb2.MoveResponse:
+        return await self._relay(self._stub().ExecuteTrajectory, request, context)
 
-    async def ExecuteGrasp(self, request, context):  # type: ignore[no-untyped-def]
-        return await self._unary("ExecuteGrasp", request, context)
+    async def ExecuteGrasp(
+        self, request: robot_pb2.ExecuteGraspRequest, context: grpc.aio.ServicerContext
+    ) -> robot_pb2.GripperResponse:
+        return await self._relay(self._stub().ExecuteGrasp, request, context)
 
-    async def SetGripper(self, request, context):  # type: ignore[no-untyped-def]
-        return await self._unary("SetGripper", request, context)
+    async def SetGripper(
+        self, request: robot_pb2.SetGripperRequest, context: grpc.aio.ServicerContext
+    ) -> robot_pb2.GripperResponse:
+        return await self._relay(self._stub().SetGripper, request, context)
 
-    async def Stop(self, request, context):  # type: ignore[no-untyped-def]
-        return await self._unary("Stop", request, context)
+    async def Stop(
+        self, request: robot_pb2.StopRequest, context: grpc.aio.ServicerContext
+    ) -> common_pb2.CommandResponse:
+        return await self._relay(self._stub().Stop, request, context)
 
-    async def EmergencyStop(self, request, context):  # type: ignore[no-untyped-def]
+    async def EmergencyStop(
+        self, request: robot_pb2.EmergencyStopRequest, context: grpc.aio.ServicerContext
+    ) -> common_pb2.CommandResponse:
         if not request.release:
             self._cell.metrics.estop.labels(self._cell.robot_id, "grpc").inc()
-        return await self._unary("EmergencyStop", request, context, estop=True)
+        return await self._relay(self._stub(estop=True).EmergencyStop, request, context, estop=True)
 
-    async def ClearError(self, request, context):  # type: ignore[no-untyped-def]
-        return await self._unary("ClearError", request, context)
+    async def ClearError(
+        self, request: robot_pb2.ClearErrorRequest, context: grpc.aio.ServicerContext
+    ) -> common_pb2.CommandResponse:
+        return await self._relay(self._stub().ClearError, request, context)
 
-    async def Enable(self, request, context):  # type: ignore[no-untyped-def]
-        return await self._unary("Enable", request, context)
+    async def Enable(
+        self, request: robot_pb2.EnableRequest, context: grpc.aio.ServicerContext
+    ) -> common_pb2.CommandResponse:
+        return await self._relay(self._stub().Enable, request, context)
 
-    async def Disable(self, request, context):  # type: ignore[no-untyped-def]
-        return await self._unary("Disable", request, context)
+    async def Disable(
+        self, request: robot_pb2.DisableRequest, context: grpc.aio.ServicerContext
+    ) -> common_pb2.CommandResponse:
+        return await self._relay(self._stub().Disable, request, context)
 
-    async def StreamJointStates(self, request, context):  # type: ignore[no-untyped-def]
-        assert self._cell.clients.robot is not None
-        call = self._cell.clients.robot.StreamJointStates(request)
+    async def StreamJointStates(
+        self, request: robot_pb2.StreamJointStatesRequest, context: grpc.aio.ServicerContext
+    ) -> AsyncIterator[common_pb2.JointState]:
+        call = self._stub().StreamJointStates(request)
         try:
             async for msg in call:
                 yield msg
@@ -147,7 +181,9 @@ class CellMetricsServicer(gateway_pb2_grpc.CellMetricsServicer):
         self._cell = cell
         self._status = status
 
-    async def StreamMetrics(self, request, context):  # type: ignore[no-untyped-def]
+    async def StreamMetrics(
+        self, request: gateway_pb2.StreamMetricsRequest, context: grpc.aio.ServicerContext
+    ) -> AsyncIterator[gateway_pb2.MetricsSample]:
         period = max(request.period_s or 1.0, 0.1)
         seq = 0
         while True:
@@ -171,17 +207,29 @@ class CellMetricsServicer(gateway_pb2_grpc.CellMetricsServicer):
             await asyncio.sleep(period)
 
 
-async def start_edge(cell: Cell, host: str, port: int, token: str) -> tuple[grpc.aio.Server, int]:
-    """Build, bind and start the edge server; returns it and the bound port (0 = any free)."""
-    from gateway.routers.system import cell_state
+class EdgeServer(GrpcShell):
+    """The edge's gRPC server (RobotController relay, CellMetrics), every call behind the token."""
 
-    async def state() -> str:
-        return cell_state(cell)
+    kind = "gateway-edge"
 
-    server = grpc_util.create_server([TokenAuthInterceptor(token)])
-    robot_pb2_grpc.add_RobotControllerServicer_to_server(RobotControllerRelay(cell), server)
-    gateway_pb2_grpc.add_CellMetricsServicer_to_server(CellMetricsServicer(cell, state), server)
-    bound = grpc_util.bind(server, host, port)
-    await server.start()
-    log.info("gRPC edge (RobotController, CellMetrics) on %s:%d", host, bound)
-    return server, bound
+    def __init__(self, cell: Cell, host: str, port: int, token: str, status: Callable[[], str]):
+        """``status``: the cell's state as ``GET /system/status`` names it (for MetricsSample.state)."""
+        super().__init__(host, port)
+        self._cell = cell
+        self._token = token
+        self._status = status
+
+    async def _start(self, stack: contextlib.AsyncExitStack) -> None:
+        async def state() -> str:
+            return self._status()
+
+        def register(server: grpc.aio.Server) -> None:
+            robot_pb2_grpc.add_RobotControllerServicer_to_server(RobotControllerRelay(self._cell), server)
+            gateway_pb2_grpc.add_CellMetricsServicer_to_server(CellMetricsServicer(self._cell, state), server)
+
+        await self._serve_grpc(
+            stack,
+            register,
+            "the gRPC edge (RobotController, CellMetrics)",
+            [TokenAuthInterceptor(self._token)],
+        )

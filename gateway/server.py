@@ -19,6 +19,7 @@ from fastapi import FastAPI
 
 from services.common.errors import ConfigurationError, RobotCommunicationError
 from services.common.settings import Settings
+from services.common.shell import ServiceShell
 
 log = logging.getLogger("pickplace.gateway.server")
 
@@ -32,34 +33,38 @@ class _Server(uvicorn.Server):
         yield
 
 
-class GatewayServer:
+class GatewayServer(ServiceShell):
+    """uvicorn serving the app, as a shell: entered once the app's lifespan has started."""
+
+    kind = "gateway"
+    STOP_TIMEOUT_S = 10.0  # uvicorn's graceful shutdown (and the app's lifespan exit) gets this long
+
     def __init__(self, app: FastAPI, host: str = "127.0.0.1", port: int = 0):
+        super().__init__()
         self.app = app
         self.host = host
         self.port = port
         self._server: _Server | None = None
-        self._task: asyncio.Task[None] | None = None
-        self._sock: socket.socket | None = None
+        self._serving: asyncio.Task[None] | None = None
 
     @property
     def url(self) -> str:
         host = f"[{self.host}]" if ":" in self.host else self.host
         return f"http://{host}:{self.port}"
 
-    async def __aenter__(self) -> GatewayServer:
+    async def _start(self, stack: contextlib.AsyncExitStack) -> None:
         family = socket.AF_INET6 if ":" in self.host else socket.AF_INET
         # IPPROTO_TCP explicitly: asyncio sets TCP_NODELAY only on sockets that say so, and without it
         # Nagle + delayed ACK add ~40 ms to every keep-alive response
         sock = socket.socket(family, socket.SOCK_STREAM, socket.IPPROTO_TCP)
+        stack.callback(sock.close)
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             sock.bind((self.host, self.port))
         except OSError as exc:
-            sock.close()
             raise RobotCommunicationError(f"gateway cannot listen on {self.host}:{self.port}: {exc}") from exc
         sock.listen(128)
         sock.setblocking(False)
-        self._sock = sock
         self.port = int(sock.getsockname()[1])
         config = uvicorn.Config(
             self.app,
@@ -70,23 +75,17 @@ class GatewayServer:
             ws_max_size=64 * 1024,
         )
         self._server = _Server(config)
-        self._task = asyncio.create_task(self._serve(sock), name="gateway-http")
-        ready = asyncio.create_task(self.app.state.ready.wait())
+        self._serving = self.spawn(self._serve(sock), "http")
+        ready = self.spawn(self.app.state.ready.wait(), "ready")
         done, _ = await asyncio.wait(
-            {self._task, ready}, timeout=STARTUP_TIMEOUT_S, return_when=asyncio.FIRST_COMPLETED
+            {self._serving, ready}, timeout=STARTUP_TIMEOUT_S, return_when=asyncio.FIRST_COMPLETED
         )
         if ready not in done:
-            ready.cancel()
-            await self._stop()
             err = getattr(self.app.state, "startup_error", None)
             if err is not None:
                 raise err
             raise ConfigurationError(f"gateway did not start within {STARTUP_TIMEOUT_S:.0f}s")
         log.info("gateway listening on %s", self.url)
-        return self
-
-    async def __aexit__(self, *exc: object) -> None:
-        await self._stop()
 
     async def _serve(self, sock: socket.socket) -> None:
         assert self._server is not None
@@ -96,22 +95,18 @@ class GatewayServer:
             # uvicorn exits the process when the lifespan fails to start; here it is just a failed start
             log.debug("uvicorn stopped: startup failed")
 
-    async def _stop(self) -> None:
+    async def _wind_down(self) -> None:
+        """uvicorn's own shutdown first, so the app's lifespan exits (buffered picks are written)."""
         if self._server is not None:
             self._server.should_exit = True
-        if self._task is not None:
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await asyncio.wait_for(asyncio.shield(self._task), timeout=10.0)
-            if not self._task.done():
-                self._task.cancel()
-        if self._sock is not None:
-            self._sock.close()
-            self._sock = None
+        if self._serving is not None and not self._serving.done():
+            await asyncio.wait({self._serving}, timeout=self.STOP_TIMEOUT_S)
 
     async def wait(self) -> None:
         """Until the server stops (or the caller is cancelled)."""
-        assert self._task is not None
-        await asyncio.shield(self._task)
+        self.require_running("wait on it")
+        assert self._serving is not None
+        await asyncio.shield(self._serving)
 
 
 def embedded_settings(settings: Settings) -> tuple[Settings, str]:
