@@ -21,6 +21,7 @@ from pickplace.v1 import common_pb2, task_pb2, task_pb2_grpc
 from services.common.bus import Bus
 from services.common.errors import InvalidInputError, SafetyError
 from services.common.keys import CellKeys
+from services.common.modes import TaskKind
 from services.common.settings import Settings
 from services.common.shell import GrpcShell, ShellStateError
 from services.task.clients import CellClients
@@ -31,7 +32,7 @@ from services.task.states import CycleState, PickOutcome, StateDeadlines, TaskCo
 
 log = logging.getLogger("pickplace.task.service")
 
-TASKS = ("stand-rod", "sort-cubes")
+TASKS = tuple(TaskKind)
 
 
 class Spawn(Protocol):
@@ -152,7 +153,7 @@ class TaskRunner:
     async def run_cycle(self, task: str | None = None) -> PickOutcome:
         task = task or self.task
         if task not in TASKS:
-            raise InvalidInputError(f"unknown task {task!r}; choose one of {list(TASKS)}")
+            raise InvalidInputError(f"unknown task {task!r}; choose one of {[str(t) for t in TASKS]}")
         self.task = task
         self.cycle_index += 1
         outcome = await self.orchestrator.run(task)
@@ -205,7 +206,7 @@ class TaskRunner:
             raise InvalidInputError("the task is already running; stop it first")
         if task:
             if task not in TASKS:
-                raise InvalidInputError(f"unknown task {task!r}; choose one of {list(TASKS)}")
+                raise InvalidInputError(f"unknown task {task!r}; choose one of {[str(t) for t in TASKS]}")
             self.task = task
         if self._spawn is None:
             raise ShellStateError("the task runner runs cycles only inside a running task service")
