@@ -109,11 +109,17 @@ class SimBusLink(ServiceShell):
     async def _start(self, stack: contextlib.AsyncExitStack) -> None:
         from services.common.sensors import publish_camera_frames
         from services.sim.twin.camera import TwinCamera
+        from services.sim.twin.engine import TwinEngine
 
         self._loop = asyncio.get_running_loop()
         keys = CellKeys(self.settings.cell_id)
         if self.frames:
-            cam = await asyncio.to_thread(TwinCamera, self.server.controller.engine, self.seed)
+            engine = self.server.controller.engine
+            if not isinstance(engine, TwinEngine):
+                raise InvalidInputError(
+                    f"camera frames need the twin engine, this sim runs {type(engine).__name__}"
+                )
+            cam = await asyncio.to_thread(TwinCamera, engine, self.seed)
             self.camera = CurrentCamera(cam)
             stack.push_async_callback(asyncio.to_thread, self.camera.close)
             # runs until the shell cancels it (the event is for callers that stop it themselves)
@@ -209,9 +215,8 @@ async def request_scene_reset(
         for reply in replies:
             if reply.ok is not None:
                 return int(json.loads(reply.ok.payload.to_bytes().decode())["seed"])
-            raise RobotCommunicationError(
-                f"scene reset on {key} refused: {reply.err.payload.to_bytes().decode()}"
-            )
+            reason = reply.err.payload.to_bytes().decode() if reply.err is not None else "no reason given"
+            raise RobotCommunicationError(f"scene reset on {key} refused: {reason}")
         raise RobotCommunicationError(
             f"no simulated cell answered a scene reset on {key} within {timeout_s} s"
         )
