@@ -127,7 +127,7 @@ def rod_size(
     the request does not carry (said in a log line). A size that is not a positive number is refused."""
     size = []
     for name, configured in (("length", configured_length_m), ("diameter", configured_diameter_m)):
-        if not request.HasField(name):  # type: ignore[arg-type]
+        if not request.HasField(name):
             log.info("the request carries no rod %s: planning with the configured %.4f m", name, configured)
             size.append(configured)
             continue

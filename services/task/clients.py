@@ -279,7 +279,7 @@ class GrpcRobot:
         return np.array(js.position)
 
     async def execute(self, traj: JointTrajectory, force_guard_n: float = 0.0) -> MoveOutcome:
-        req = robot_pb2.ExecuteTrajectoryRequest(trajectory=traj.to_proto())
+        req = robot_pb2.ExecuteTrajectoryRequest(trajectory=traj.to_proto())  # type: ignore[arg-type]
         if force_guard_n > 0:
             req.force_guard.CopyFrom(robot_pb2.ForceGuard(force_drop_n=force_guard_n))
         with rpc_errors():

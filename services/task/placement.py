@@ -44,7 +44,7 @@ def free_place_xy(
                 continue
             a = r.axis[:2] / max(float(np.linalg.norm(r.axis[:2])), 1e-9)
             t = float(np.clip(np.dot(p - r.center[:2], a), -r.length / 2, r.length / 2))
-            ok = np.linalg.norm(r.center[:2] + t * a - p) >= r.diameter / 2 + clearance_m
+            ok = bool(np.linalg.norm(r.center[:2] + t * a - p) >= r.diameter / 2 + clearance_m)
         if ok:
             return p
     return None

@@ -154,7 +154,7 @@ class TaskRunner:
         task = task or self.task
         if task not in TASKS:
             raise InvalidInputError(f"unknown task {task!r}; choose one of {[str(t) for t in TASKS]}")
-        self.task = task
+        self.task = TaskKind(task)
         self.cycle_index += 1
         outcome = await self.orchestrator.run(task)
         self._report(outcome)
@@ -207,7 +207,7 @@ class TaskRunner:
         if task:
             if task not in TASKS:
                 raise InvalidInputError(f"unknown task {task!r}; choose one of {[str(t) for t in TASKS]}")
-            self.task = task
+            self.task = TaskKind(task)
         if self._spawn is None:
             raise ShellStateError("the task runner runs cycles only inside a running task service")
         self._loop_task = self._spawn(self._loop(cycles), "loop")
