@@ -27,6 +27,7 @@ from gateway.server import GatewayServer
 from services.common import grpc_util
 from services.common.bus import Bus
 from services.common.keys import CellKeys
+from services.common.modes import TaskKind
 from services.common.settings import DatabaseSettings, Settings
 from tests.conftest import free_port
 
@@ -173,7 +174,7 @@ def pick_event(
         failure_reason="" if success else "object slipped during LIFT",
         error_code="" if success else "GraspFailureError",
         attempts=1,
-        task="stand-rod",
+        task=TaskKind.STAND_ROD,
     )
     ev.stage_durations_s.update({"DETECT": 0.4, "PLAN": 0.6, "APPROACH": 2.0})
     return ev
@@ -214,7 +215,7 @@ class FakeTaskController(task_pb2_grpc.TaskControllerServicer):
         if self.running:
             return common_pb2.CommandResponse(success=False, message="already running")
         self.running = True
-        self._runner = asyncio.create_task(self._run(request.task or "stand-rod", request.cycles or 1))
+        self._runner = asyncio.create_task(self._run(request.task or TaskKind.STAND_ROD, request.cycles or 1))
         return common_pb2.CommandResponse(success=True, message=f"started {request.task or 'stand-rod'}")
 
     async def Stop(self, request, context):  # type: ignore[no-untyped-def]

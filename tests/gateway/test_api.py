@@ -16,6 +16,7 @@ from gateway.server import GatewayServer
 from services.common.bus import Bus
 from services.common.errors import ConfigurationError
 from services.common.keys import CellKeys
+from services.common.modes import TaskKind
 from services.common.settings import DatabaseSettings
 from tests.gateway.conftest import (
     AUTH,
@@ -150,7 +151,7 @@ async def test_start_stop_relay_and_503_without_task_service(settings, sqlite_db
             assert r.status_code == 422 and r.json()["errors"][0]["field"] == "body.cycles"
             r = await gw.client.post("/api/v1/system/stop", headers=AUTH)
             assert r.status_code == 200 and r.json()["success"]
-        assert task.starts == [("sort-cubes", 3)] and task.stops == 1
+        assert task.starts == [(TaskKind.SORT_CUBES, 3)] and task.stops == 1
 
 
 async def test_estop_reaches_the_simulated_dobot(robot_settings, sim_server, sqlite_db, tmp_path):

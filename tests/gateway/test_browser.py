@@ -18,6 +18,7 @@ from pickplace.v1 import vision_pb2
 
 from services.common.bus import Bus
 from services.common.keys import CellKeys
+from services.common.modes import TaskKind
 from services.common.settings import REPO_ROOT
 from services.robot.service import RobotService
 from tests.gateway.conftest import (
@@ -97,7 +98,7 @@ async def test_dashboard_live_start_pick_and_estop(robot_settings, sim_server, s
                 # Start → the task service runs one cycle → its pick shows up in the history
                 await page.get_by_role("button", name="start the task").click()
                 await expect(page.get_by_test_id("history").locator("tr.ok")).to_have_count(1, timeout=15_000)
-                assert task.starts == [("stand-rod", 0)]
+                assert task.starts == [(TaskKind.STAND_ROD, 0)]
                 await expect(page.get_by_test_id("success-rate")).to_have_text("100.0 %", timeout=10_000)
 
                 # E-stop while the arm moves

@@ -11,6 +11,7 @@ from pickplace.v1 import common_pb2, grasp_pb2, grasp_pb2_grpc, motion_pb2
 from services.common.errors import ConfigurationError, IKFailureError, InvalidInputError
 from services.common.grpc_util import channel, rpc_errors
 from services.common.messages import matrix_to_pose, pose_to_matrix
+from services.common.modes import TaskKind
 from services.common.settings import Settings, load_settings
 from services.grasp.geometry import pose, rotation_z
 from services.grasp.service import GraspPlannerServicer, GraspService
@@ -52,7 +53,7 @@ async def test_plan_pick_and_stand_returns_the_waypoint_plan(stub) -> None:  # t
     req = grasp_pb2.PickAndStandRequest(center=[0.5, -0.1, 0.011], axis=[0.3, 0.95, 0.0])
     with rpc_errors():
         plan = await stub.PlanPickAndStand(req)
-    assert plan.task == "stand-rod"
+    assert plan.task == TaskKind.STAND_ROD
     names = [w.name for w in plan.waypoints]
     assert names[:5] == ["SAFE_HOME", "PRE_GRASP", "GRASP", "LIFT", "REORIENT"]
     by_name = {w.name: w for w in plan.waypoints}
@@ -104,7 +105,7 @@ async def test_plan_pick_and_place_uses_the_colour_zone(stub) -> None:  # type: 
     )
     with rpc_errors():
         plan = await stub.PlanPickAndPlace(req)
-    assert plan.task == "sort-cubes"
+    assert plan.task == TaskKind.SORT_CUBES
     assert list(plan.place_position)[:2] == pytest.approx([0.30, -0.45])
     assert plan.held_object.shape == motion_pb2.AttachedObject.BOX
     with pytest.raises(InvalidInputError, match="purple"), rpc_errors():
