@@ -32,6 +32,7 @@ from services.grasp.convert import (
     grasp_to_proto,
     joints_or,
     plan_to_proto,
+    rod_size,
 )
 from services.grasp.cube import CubeObservation, plan_pick_and_place
 from services.grasp.rod import RodObservation, plan_pick_and_stand
@@ -114,12 +115,8 @@ class GraspPlannerServicer(grasp_pb2_grpc.GraspPlannerServicer):
         def work() -> grasp_pb2.PickPlan:
             t0 = time.perf_counter()
             rod_cfg = self.settings.vision.rod
-            rod = RodObservation.create(
-                list(request.center),
-                list(request.axis),
-                request.length or rod_cfg.length_m,
-                request.diameter or rod_cfg.diameter_m,
-            )
+            length, diameter = rod_size(request, rod_cfg.length_m, rod_cfg.diameter_m)
+            rod = RodObservation.create(list(request.center), list(request.axis), length, diameter)
             q_now = joints_or(request.current_joints, self.home, self.spec.dof, "current_joints")
             check = MotionCollisionCheck.from_settings(self.settings, boxes_from_proto(request.obstacles))
             cfg = self.cfg
