@@ -45,6 +45,16 @@ from services.dobot import RobotMode
 log = logging.getLogger("pickplace.robot.client")
 
 
+def _deg(v_rad: np.ndarray) -> list[float]:
+    """Radians → degrees, as the plain floats the command codec formats."""
+    return np.rad2deg(v_rad).tolist()
+
+
+def _pose(T: np.ndarray) -> list[float]:
+    """A transform → the controller's pose (mm, degrees), as plain floats."""
+    return transform_to_dobot_pose(T).tolist()
+
+
 class ClientState(enum.Enum):
     IDLE = "idle"
     CONNECTING = "connecting"
@@ -454,11 +464,11 @@ class DobotClient:
 
     async def positive_kin(self, q: ArrayLike) -> np.ndarray:
         q_rad = finite_vector(q, 6, "joints")
-        return dobot_pose_to_transform((await self.request(dobot.positive_kin(np.rad2deg(q_rad)))).floats())
+        return dobot_pose_to_transform((await self.request(dobot.positive_kin(_deg(q_rad)))).floats())
 
     async def inverse_kin(self, T: np.ndarray, joint_near: ArrayLike | None = None) -> np.ndarray:
-        near = None if joint_near is None else np.rad2deg(finite_vector(joint_near, 6, "joint_near"))
-        reply = await self.request(dobot.inverse_kin(transform_to_dobot_pose(T), near))
+        near = None if joint_near is None else _deg(finite_vector(joint_near, 6, "joint_near"))
+        reply = await self.request(dobot.inverse_kin(_pose(T), near))
         return np.deg2rad(reply.floats())
 
     async def digital_output(
@@ -478,42 +488,42 @@ class DobotClient:
         self, q: ArrayLike, a: int | None = None, v: int | None = None, cp: int | None = None
     ) -> int | None:
         q_rad = finite_vector(q, 6, "joint target")
-        return (await self.request(dobot.mov_j_joint(np.rad2deg(q_rad), a, v, cp))).result_id
+        return (await self.request(dobot.mov_j_joint(_deg(q_rad), a, v, cp))).result_id
 
     async def mov_j_pose(self, T: np.ndarray, a: int | None = None, v: int | None = None) -> int | None:
-        return (await self.request(dobot.mov_j_pose(transform_to_dobot_pose(T), a, v))).result_id
+        return (await self.request(dobot.mov_j_pose(_pose(T), a, v))).result_id
 
     async def mov_l(self, q: ArrayLike, a: int | None = None, v: int | None = None) -> int | None:
         q_rad = finite_vector(q, 6, "joint target")
-        return (await self.request(dobot.mov_l_joint(np.rad2deg(q_rad), a, v))).result_id
+        return (await self.request(dobot.mov_l_joint(_deg(q_rad), a, v))).result_id
 
     async def mov_l_pose(
         self, T: np.ndarray, a: int | None = None, v: int | None = None, speed_m_s: float | None = None
     ) -> int | None:
         speed = None if speed_m_s is None else max(1, round(speed_m_s * 1000))
-        return (await self.request(dobot.mov_l_pose(transform_to_dobot_pose(T), a, v, speed))).result_id
+        return (await self.request(dobot.mov_l_pose(_pose(T), a, v, speed))).result_id
 
     async def servo_j(self, q: ArrayLike, t_s: float) -> int | None:
         q_rad = finite_vector(q, 6, "servo target")
-        return (await self.request(dobot.servo_j(np.rad2deg(q_rad), t_s))).result_id
+        return (await self.request(dobot.servo_j(_deg(q_rad), t_s))).result_id
 
     async def rel_mov_l_tool(
         self, offset_m_rad: ArrayLike, a: int | None = None, v: int | None = None
     ) -> int | None:
         o = finite_vector(offset_m_rad, 6, "offset")
-        mm_deg = np.concatenate([o[:3] * 1000.0, np.rad2deg(o[3:])])
+        mm_deg = [*(o[:3] * 1000.0).tolist(), *_deg(o[3:])]
         return (await self.request(dobot.rel_mov_l_tool(mm_deg, a, v))).result_id
 
     async def rel_mov_j_tool(
         self, offset_m_rad: ArrayLike, a: int | None = None, v: int | None = None
     ) -> int | None:
         o = finite_vector(offset_m_rad, 6, "offset")
-        mm_deg = np.concatenate([o[:3] * 1000.0, np.rad2deg(o[3:])])
+        mm_deg = [*(o[:3] * 1000.0).tolist(), *_deg(o[3:])]
         return (await self.request(dobot.rel_mov_j_tool(mm_deg, a, v))).result_id
 
     async def rel_joint_mov_j(self, dq: ArrayLike, a: int | None = None, v: int | None = None) -> int | None:
         d = finite_vector(dq, 6, "joint offsets")
-        return (await self.request(dobot.rel_joint_mov_j(np.rad2deg(d), a, v))).result_id
+        return (await self.request(dobot.rel_joint_mov_j(_deg(d), a, v))).result_id
 
     # ------------------------------------------------------------------ completion
     async def describe_alarms(self) -> tuple[list[int], str]:
