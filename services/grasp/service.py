@@ -26,7 +26,7 @@ from services.common.errors import ConfigurationError, InvalidInputError
 from services.common.messages import pose_to_matrix
 from services.common.settings import RodStandSettings, Settings
 from services.common.shell import GrpcShell
-from services.grasp.collision import MotionCollisionCheck, tool_geometry
+from services.grasp.collision import MotionCollisionCheck
 from services.grasp.convert import (
     boxes_from_proto,
     grasp_to_proto,
@@ -38,6 +38,7 @@ from services.grasp.cube import CubeObservation, plan_pick_and_place
 from services.grasp.rod import RodObservation, plan_pick_and_stand
 from services.grasp.synthesis import ObjectSpec, compute_grasps
 from services.kinematics.robot_models import get_robot
+from services.kinematics.tool import tool_frame
 
 log = logging.getLogger("pickplace.grasp.service")
 
@@ -58,7 +59,7 @@ class GraspPlannerServicer(grasp_pb2_grpc.GraspPlannerServicer):
         self.cfg = settings.grasp
         model = settings.robot.model
         self.spec = get_robot(model)
-        self.T_flange_tool = tool_geometry(settings).T_flange_tool()
+        self.T_flange_tool = tool_frame(settings)
         home_deg = self.cfg.safe_home_joints_deg.get(model)
         if home_deg is None:
             raise ConfigurationError(

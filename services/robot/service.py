@@ -26,6 +26,7 @@ from services.common.messages import pose_to_matrix
 from services.common.settings import Settings
 from services.common.shell import GrpcShell
 from services.kinematics.robot_models import get_robot
+from services.kinematics.tool import tool_frame
 from services.kinematics.trajectory import JointTrajectory
 from services.robot.client import ClientState, DobotClient, FeedbackState
 from services.robot.driver import RobotDriver
@@ -237,9 +238,7 @@ def build_driver(settings: Settings) -> RobotDriver:
         feedback_timeout_s=r.feedback_timeout_s,
         reconnect=r.reconnect,
     )
-    T_flange_tool = np.eye(4)
-    T_flange_tool[2, 3] = settings.gripper.tcp_offset_m  # the grasp centre, along the flange z axis
-    return RobotDriver(client, get_robot(r.model), settings, T_flange_tool)
+    return RobotDriver(client, get_robot(r.model), settings, tool_frame(settings))
 
 
 def robot_link_up(client: DobotClient, feedback_timeout_s: float, now_ns: int) -> bool:

@@ -30,6 +30,7 @@ from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.common.settings import Settings
 from services.kinematics import analytic
 from services.kinematics.robot_models import get_robot
+from services.kinematics.tool import tool_frame
 from services.kinematics.trajectory import JointTrajectory
 from services.task.ports import (
     GraspPlan,
@@ -211,9 +212,7 @@ class GrpcMotion:
         self._timeout = max(settings.grpc.request_timeout_s, settings.task.plan_deadline_s)
         self._spec = get_robot(settings.robot.model)
         self._task = settings.task
-        T = np.eye(4)
-        T[2, 3] = settings.gripper.tcp_offset_m
-        self._T_flange_tool = T
+        self._T_flange_tool = tool_frame(settings)
 
     def _scene(
         self, obstacles: tuple[SeenBox, ...], held: object | None, table_contact: bool = False

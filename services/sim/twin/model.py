@@ -10,6 +10,7 @@ import numpy as np
 from services.common.errors import ConfigurationError
 from services.common.settings import GripperSettings, Settings, TwinSettings
 from services.kinematics.robot_models import RobotSpec, get_robot
+from services.kinematics.tool import tool_frame
 from services.sim.twin import mjcf
 from services.sim.twin.calibration_board import add_calibration_board
 from services.sim.twin.scene import Scene, sample_scene
@@ -35,6 +36,7 @@ class TwinWorld:
     gripper: GripperSettings
     xml: str
     gains: mjcf.ArmGains
+    T_flange_tool: Array  # the cell's one TCP frame (services.kinematics.tool)
     arm_qpos: Array = field(init=False)
     arm_dof: Array = field(init=False)
     arm_act: Array = field(init=False)
@@ -162,5 +164,12 @@ def build_world(settings: Settings, seed: int | None = None, scene: Scene | None
     if twin.calibration_board:
         xml = add_calibration_board(xml, settings.vision.calibration.board, settings.gripper)
     return TwinWorld(
-        model=_compile(xml), spec=spec, scene=scene, twin=twin, gripper=settings.gripper, xml=xml, gains=gains
+        model=_compile(xml),
+        spec=spec,
+        scene=scene,
+        twin=twin,
+        gripper=settings.gripper,
+        xml=xml,
+        gains=gains,
+        T_flange_tool=tool_frame(settings),
     )

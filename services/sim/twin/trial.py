@@ -50,7 +50,7 @@ class ScriptedArm:
     def __init__(self, engine: TwinEngine):
         self.engine = engine
         self.spec = engine.world.spec
-        self.T_flange_tool = make_transform(np.eye(3), [0.0, 0.0, engine.world.tcp_offset_m])
+        self.T_flange_tool = engine.world.T_flange_tool
         self.T_tool_flange = invert_transform(self.T_flange_tool)
         self.q = engine.state().q.copy()
         self.last: EngineState = engine.state()
