@@ -4,8 +4,9 @@
   arm with a given tool from :mod:`services.kinematics.urdf`.
 - :class:`Kinematics` holds one pinocchio ``Data`` (not thread-safe: one per thread or
   request) and offers FK for any frame, the tool Jacobian, manipulability, the
-  closed-form IK for the UR-structure arms (all solutions within limits, verified by
-  FK), a damped-least-squares / Levenberg–Marquardt numerical IK for any URDF and tool
+  closed-form IK for the UR-structure arms (all solutions within limits, exact on this
+  URDF: :mod:`services.kinematics.analytic` solves the same joint chain, with the tool
+  folded in, in closed form — no table to refine), a damped-least-squares / Levenberg–Marquardt numerical IK for any URDF and tool
   frame with random restarts and unwrapping to the seed, and :meth:`Kinematics.solve_ik`,
   which picks the solution nearest the seed away from singularities.
 """
@@ -25,6 +26,7 @@ from scipy.linalg import lapack
 from services.common.errors import ConfigurationError, IKFailureError, InvalidInputError
 from services.common.frames import invert_transform
 from services.kinematics import analytic
+from services.kinematics.analytic import KinematicModel
 from services.kinematics.poses import check_pose, pose_text
 from services.kinematics.robot_models import RobotSpec, get_robot
 from services.kinematics.trajectory import Array, JointLimits, joint_vector
@@ -166,6 +168,14 @@ class Kinematics:
         self._continuous_idx = tuple(int(i) for i in np.flatnonzero(self._continuous))
         self._lower = self.limits.lower.tolist()
         self._upper = self.limits.upper.tolist()
+        self._ik_chain = self._closed_form_chain()
+
+    def _closed_form_chain(self) -> analytic.Chain | None:
+        """The URDF's joint chain ending at the tool tip, when the closed form applies to it."""
+        if self.spec.name not in ("nova5", "ur5e", "ur3"):
+            return None  # an arm read from some URDF (arm_from_urdf): numerical IK only
+        ch = analytic.chain(self.spec, KinematicModel.URDF).with_tool(self.arm.T_flange_tool)
+        return ch if ch.closed_form is not None else None
 
     @property
     def dof(self) -> int:
@@ -217,23 +227,29 @@ class Kinematics:
 
     # --- inverse ------------------------------------------------------------------------------
     def has_analytic_ik(self) -> bool:
-        s = self.spec
-        return bool(
-            s.dof == 6
-            and s.name in ("nova5", "ur5e", "ur3")
-            and np.allclose(s.alpha, [math.pi / 2, 0, 0, math.pi / 2, -math.pi / 2, 0])
-            and abs(s.a[0]) + abs(s.a[3]) + abs(s.a[4]) + abs(s.a[5]) == 0.0
-            and abs(s.d[1]) + abs(s.d[2]) == 0.0
-        )
+        return self._ik_chain is not None
 
     def ik_analytic(self, T_base_tool: Array, seed: ArrayLike | None = None) -> Array:
         """All closed-form solutions within joint limits, each on the turn nearest ``seed``,
-        sorted by distance to it: (k, dof), k ≤ 8 (may be empty)."""
-        if not self.has_analytic_ik():
+        sorted by distance to it: (k, dof), k ≤ 8 (may be empty). Each reproduces the tool pose
+        on this URDF to rounding (a pose a hair beyond the workspace boundary: within 1e-6)."""
+        if self._ik_chain is None:
             raise ConfigurationError(f"{self.spec.name} has no closed-form IK")
         T = check_pose(T_base_tool)
-        s = None if seed is None else joint_vector(seed, self.dof, "seed")
-        return analytic.solutions_within_limits(self.spec, self.tool_to_flange(T), s)
+        return analytic.solve_within_limits(
+            self._ik_chain, T, self._seed_list(seed), self._lower, self._upper
+        )
+
+    def _seed_list(self, seed: ArrayLike | None) -> list[float] | None:
+        """The seed as floats: fast acceptance of a finite float vector (the IK hot path), anything
+        else through joint_vector for its message."""
+        if seed is None:
+            return None
+        if isinstance(seed, np.ndarray) and seed.shape == (self.dof,) and seed.dtype == np.float64:
+            values: list[float] = seed.tolist()
+            if math.isfinite(sum(values)):
+                return values
+        return joint_vector(seed, self.dof, "seed").tolist()
 
     def ik_numeric(
         self,

@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike
 
 from services.common.errors import InvalidInputError
 from services.common.frames import check_transform, transform_to_dobot_pose
 from services.kinematics.trajectory import Array
-
-_EYE3 = np.eye(3)
 
 
 def check_pose(T: ArrayLike, name: str = "target pose") -> Array:
@@ -18,22 +18,23 @@ def check_pose(T: ArrayLike, name: str = "target pose") -> Array:
         M = np.asarray(T, dtype=float)
     except (TypeError, ValueError) as exc:
         raise InvalidInputError(f"{name} must be a numeric 4x4 transform, got {T!r}") from exc
-    # fast acceptance (IK sits in hot loops); anything doubtful goes to the full check for its message
-    if M.shape == (4, 4) and np.isfinite(M).all():
-        R = M[:3, :3]
-        ortho = float(np.abs(R @ R.T - _EYE3).max())
-        det = (
-            R[0, 0] * (R[1, 1] * R[2, 2] - R[1, 2] * R[2, 1])
-            - R[0, 1] * (R[1, 0] * R[2, 2] - R[1, 2] * R[2, 0])
-            + R[0, 2] * (R[1, 0] * R[2, 1] - R[1, 1] * R[2, 0])
-        )
+    # fast acceptance in plain floats (IK sits in hot loops); anything doubtful goes to the full
+    # check for its message
+    if M.shape == (4, 4):
+        (a, b, c, x), (d, e, f, y), (g, h, i, z), last = M.tolist()
         if (
-            ortho < 1e-6
-            and abs(det - 1.0) < 1e-6
-            and M[3, 0] == 0
-            and M[3, 1] == 0
-            and M[3, 2] == 0
-            and M[3, 3] == 1
+            last == [0.0, 0.0, 0.0, 1.0]
+            and math.isfinite(a + b + c + d + e + f + g + h + i + x + y + z)
+            and max(
+                abs(a * a + b * b + c * c - 1.0),
+                abs(d * d + e * e + f * f - 1.0),
+                abs(g * g + h * h + i * i - 1.0),
+                abs(a * d + b * e + c * f),
+                abs(a * g + b * h + c * i),
+                abs(d * g + e * h + f * i),
+                abs(a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) - 1.0),
+            )
+            < 1e-6
         ):
             return M
     return check_transform(M, name)

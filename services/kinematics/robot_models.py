@@ -9,6 +9,20 @@ Nova5 velocity/acceleration limits are NOT published (the vendor URDF has
 three big joints and 180 °/s on the wrist, accelerations of 2.5x/3x those per
 second. They are below UR5e's 180 °/s on every joint and can be raised in
 ``config/robots/limits.yaml`` once measured on hardware.
+
+UR frames: the DH base frame of UR5e/UR3 is UR's controller ``base`` frame (URScript poses, the
+teach pendant), and so is ``base_link`` in our URDFs; ROS ur_description's ``base_link`` is that
+frame turned 180° about z. A pose taken from ROS tools must be turned by Rz(π) first.
+
+UR3 wrist 3 is ±2π here, in the URDF and wherever limits are read (UR's datasheet calls it
+"infinite"): a continuous URDF joint is a (cos, sin) pair in pinocchio, not one angle, which
+the planner, the trajectory checks and the IK (one angle per joint) do not handle; ±2π is what
+UR's own ROS description uses, and two full turns cover any pick-and-place motion because every
+IK answer is unwrapped to the turn nearest its seed.
+
+The DH tables are the *idealised* model (the simulated cell is built on it). The robot's own
+model is its URDF (:mod:`services.kinematics.urdf`): the same frames for the URs, Dobot's joint
+table for the Nova5, which differs from the table below by up to 6.3 µm at the flange.
 """
 
 from __future__ import annotations
@@ -23,8 +37,6 @@ import yaml
 from services.common.errors import ConfigurationError
 
 ROBOTS_DIR = Path(__file__).resolve().parents[2] / "config" / "robots"
-
-UNLIMITED = 1e9  # rad: a continuous joint (UR3 wrist 3)
 
 
 @dataclass(frozen=True)
@@ -111,8 +123,8 @@ UR3 = RobotSpec(
     a=np.array([0.0, -0.24365, -0.21325, 0.0, 0.0, 0.0]),
     alpha=np.array([_HALF_PI, 0.0, 0.0, _HALF_PI, -_HALF_PI, 0.0]),
     theta_offset=np.zeros(6),
-    lower=np.array([-2 * np.pi, -2 * np.pi, -np.pi, -2 * np.pi, -2 * np.pi, -UNLIMITED]),
-    upper=np.array([2 * np.pi, 2 * np.pi, np.pi, 2 * np.pi, 2 * np.pi, UNLIMITED]),
+    lower=np.array([-2 * np.pi, -2 * np.pi, -np.pi, -2 * np.pi, -2 * np.pi, -2 * np.pi]),
+    upper=np.array([2 * np.pi, 2 * np.pi, np.pi, 2 * np.pi, 2 * np.pi, 2 * np.pi]),
     max_velocity=_deg(180, 180, 180, 360, 360, 360),
     max_acceleration=_deg(480, 480, 480, 960, 960, 960),
     max_jerk=_deg(4800, 4800, 4800, 9600, 9600, 9600),

@@ -5,7 +5,14 @@
   controller's. The vendor gives no velocity limits; ours (``config/robots/limits.yaml``)
   go into the ``velocity`` attributes.
 - UR5e / UR3: built from the nominal DH table (spec §7); the link frames *are* the DH
-  frames, so the flange (``tool0``) equals the DH end frame.
+  frames, so the flange (``tool0``) equals the DH end frame. ``base_link`` here is UR's
+  controller ``base`` frame (the frame of URScript poses and the teach pendant), which is
+  ROS ur_description's ``base_link`` turned 180° about z: poses from ROS tools need that turn.
+  UR3 wrist 3 is limited to ±2π like every other UR wrist joint (see robot_models).
+
+:func:`arm_joints` is the one joint table: the URDF text is written from it and the closed-form
+IK (:mod:`services.kinematics.analytic`) solves the chain it describes, with the numbers exactly
+as written in the file (15 significant digits), so both see the same robot.
 
 Collision geometry is one capsule per straight piece of each link (the ``d`` and ``a``
 offsets of the DH table, mapped into the URDF link frame), written as URDF
@@ -169,6 +176,71 @@ def flange_link(spec: RobotSpec) -> str:
 def _fmt(v: float) -> str:
     s = f"{float(v):.15g}"
     return "0" if s in ("-0", "0") else s
+
+
+def _written(v: object) -> tuple[float, ...]:
+    """Values as the URDF text gives them back (15 significant digits)."""
+    return tuple(float(_fmt(x)) for x in np.ravel(v))
+
+
+@dataclass(frozen=True)
+class JointOrigin:
+    """One URDF joint as written: origin (m, rad rpy) in the parent link; ``axis`` None when fixed."""
+
+    name: str
+    parent: str
+    child: str
+    xyz: tuple[float, ...]
+    rpy: tuple[float, ...]
+    axis: tuple[float, ...] | None
+    lower: float = 0.0
+    upper: float = 0.0
+
+    def T_parent_child(self) -> Array:
+        """The origin transform (the joint at zero), with URDF's rpy convention Rz(y) Ry(p) Rx(r)."""
+        T = np.eye(4)
+        T[:3, :3] = Rotation.from_euler("xyz", self.rpy).as_matrix()
+        T[:3, 3] = self.xyz
+        return T
+
+
+def arm_joints(spec: RobotSpec) -> tuple[JointOrigin, ...]:
+    """The six arm joints, then (UR) the flange's fixed joint to ``tool0``; the Nova5's flange is Link6."""
+    if spec.name == "nova5":
+        return tuple(
+            JointOrigin(n, p, c, _written(xyz), _written(rpy), _written(axis), *_written((lo, hi)))
+            for n, p, c, xyz, rpy, axis, lo, hi in NOVA5_JOINTS
+        )
+    names = link_names(spec)
+    joints = []
+    fixed_prev = np.eye(4)
+    for i in range(spec.dof):
+        Rz = np.eye(4)
+        Rz[:3, :3] = Rotation.from_euler("z", spec.theta_offset[i]).as_matrix()
+        T = fixed_prev @ Rz
+        lower, upper = _written((spec.lower[i], spec.upper[i]))
+        joints.append(
+            JointOrigin(
+                spec.joint_names[i],
+                names[i],
+                names[i + 1],
+                _written(T[:3, 3]),
+                _written(_rpy(T[:3, :3])),
+                (0.0, 0.0, 1.0),
+                lower,
+                upper,
+            )
+        )
+        fixed_prev = _dh(spec, i, 0.0)
+    flange = JointOrigin(
+        "flange_fixed",
+        names[-1],
+        "tool0",
+        _written(fixed_prev[:3, 3]),
+        _written(_rpy(fixed_prev[:3, :3])),
+        None,
+    )
+    return (*joints, flange)
 
 
 def _vec(v: object) -> str:
@@ -369,41 +441,18 @@ def robot_urdf(spec: RobotSpec, tool: ToolGeometry | None = None) -> str:
         )
     else:
         parts.append(
-            "     Link frames are the nominal DH frames (UniversalRobots default_kinematics.yaml). -->\n"
+            "     Link frames are the nominal DH frames (UniversalRobots default_kinematics.yaml). base_link is\n"
+            "     UR's controller base frame (URScript poses), i.e. ROS ur_description's base_link turned 180 deg\n"
+            "     about z. Wrist 3 is limited to +-2 pi (a revolute joint, like the other wrist joints). -->\n"
         )
     parts.append(f'<robot name="{spec.name}">\n')
     for k, name in enumerate(names):
         parts.append(_link_xml(name, segments[k], radii[k], masses[k]))
-    if spec.name == "nova5":
-        for k, (jn, parent, child, xyz, rpy, axis, lo, hi) in enumerate(NOVA5_JOINTS):
-            parts.append(_joint_xml(jn, parent, child, xyz, rpy, axis, lo, hi, spec.max_velocity[k]))
-    else:
-        fixed_prev = np.eye(4)
-        for i in range(spec.dof):
-            T = fixed_prev.copy()
-            Rz = np.eye(4)
-            Rz[:3, :3] = Rotation.from_euler("z", spec.theta_offset[i]).as_matrix()
-            T = T @ Rz
-            lo = max(spec.lower[i], -2 * np.pi)
-            hi = min(spec.upper[i], 2 * np.pi)
-            parts.append(
-                _joint_xml(
-                    spec.joint_names[i],
-                    names[i],
-                    names[i + 1],
-                    T[:3, 3],
-                    _rpy(T[:3, :3]),
-                    (0, 0, 1),
-                    lo,
-                    hi,
-                    spec.max_velocity[i],
-                )
-            )
-            fixed_prev = _dh(spec, i, 0.0)
-        parts.append('  <link name="tool0"/>\n')
-        parts.append(
-            _joint_xml("flange_fixed", names[-1], "tool0", fixed_prev[:3, 3], _rpy(fixed_prev[:3, :3]), None)
-        )
+    for k, j in enumerate(arm_joints(spec)):
+        if j.axis is None:
+            parts.append(f'  <link name="{j.child}"/>\n')
+        velocity = spec.max_velocity[k] if j.axis is not None else 0.0
+        parts.append(_joint_xml(j.name, j.parent, j.child, j.xyz, j.rpy, j.axis, j.lower, j.upper, velocity))
     parts.append(_tool_xml(flange_link(spec), tool))
     parts.append("</robot>\n")
     return "".join(parts)
