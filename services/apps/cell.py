@@ -21,6 +21,7 @@ from services.common.settings import Settings
 from services.robot.service import RobotService
 from services.sim.app import build_sim_server
 from services.sim.dobot_server import SimDobotServer
+from services.sim.scene_reset import SceneReset
 from services.task.service import TaskService
 from services.vision.service import VisionService
 
@@ -52,6 +53,7 @@ class Cell:
         self.robot: RobotService | None = None
         self.vision: VisionService | None = None
         self.task: TaskService | None = None
+        self._scene_reset: SceneReset | None = None
         self._stack = contextlib.AsyncExitStack()
 
     # ------------------------------------------------------------------ lifecycle
@@ -167,24 +169,22 @@ class Cell:
 
     async def reset_scene(self, seed: int) -> None:
         """A fresh seeded scene (new rod pose, cube layout) with the arm where it is now."""
-        from services.sim.twin import create_twin_engine
         from services.sim.twin.camera import TwinCamera
+        from services.sim.twin.engine import TwinEngine
 
         assert self.sim is not None and self.vision is not None
-        s = with_updates(self.settings, sim={"seed": seed})
-        new = await asyncio.to_thread(create_twin_engine, s, seed)
-        with self.sim.lock:
-            ctrl = self.sim.controller
-            old = ctrl.engine
-            new.reset(ctrl.measured.q)
-            new.set_digital_outputs(ctrl.do_mask | (ctrl.tool_do_mask << 32))
-            ctrl.engine = new
+        vision = self.vision
+
+        async def swap_camera(engine: TwinEngine) -> None:
+            old_cam = vision.camera
+            vision.camera = TwinCamera(engine, seed=seed)
+            if old_cam is not None:
+                await asyncio.to_thread(old_cam.close)
+
+        if self._scene_reset is None:
+            self._scene_reset = SceneReset(self.sim, with_updates(self.settings, sim={"engine": "twin"}))
+        await self._scene_reset(seed, swap_camera)
         self.seed = seed
-        old_cam = self.vision.camera
-        self.vision.camera = TwinCamera(new, seed=seed)
-        if old_cam is not None:
-            await asyncio.to_thread(old_cam.close)
-        await asyncio.to_thread(old.close)
 
     async def settle(self, sim_seconds: float) -> None:
         """Wait ``sim_seconds`` of simulated time (counted in controller feedback packets)."""
@@ -200,12 +200,12 @@ class Cell:
             if count >= need:
                 done.set()
 
-        client.add_listener(tick)  # type: ignore[arg-type]
+        client.add_listener(tick)
         try:
             async with asyncio.timeout(60.0 + 10 * sim_seconds):
                 await done.wait()
         finally:
-            client.remove_listener(tick)  # type: ignore[arg-type]
+            client.remove_listener(tick)
 
     async def next_scene(self) -> None:
         await self.reset_scene(self.seed + 1)

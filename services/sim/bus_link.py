@@ -19,7 +19,7 @@ import contextlib
 import json
 import logging
 import threading
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from services.common.bus import Bus
 from services.common.errors import InvalidInputError, RobotCommunicationError
@@ -29,6 +29,10 @@ from services.common.sensors import CameraIntrinsics, RGBDFrame
 from services.common.settings import Settings
 from services.common.shell import ServiceShell, ShellStateError
 from services.sim.dobot_server import SimDobotServer
+from services.sim.scene_reset import SceneReset
+
+if TYPE_CHECKING:
+    from services.sim.twin.engine import TwinEngine
 
 log = logging.getLogger("pickplace.sim.bus")
 
@@ -104,7 +108,7 @@ class SimBusLink(ServiceShell):
         self.camera: CurrentCamera | None = None
         self.resets = 0
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._reset_lock = asyncio.Lock()
+        self._reset = SceneReset(server, settings)
 
     async def _start(self, stack: contextlib.AsyncExitStack) -> None:
         from services.common.sensors import publish_camera_frames
@@ -176,31 +180,19 @@ class SimBusLink(ServiceShell):
 
     async def reset_scene(self, seed: int) -> int:
         """A fresh seeded scene with the arm where it is now and the gripper outputs kept."""
-        from services.sim.twin import create_twin_engine
         from services.sim.twin.camera import TwinCamera
 
-        if self.settings.sim.engine != "twin":
-            raise InvalidInputError(
-                f"scene reset needs the twin engine, this sim runs {self.settings.sim.engine!r}"
-            )
-        async with self._reset_lock:
-            s = self.settings.model_copy(update={"sim": self.settings.sim.model_copy(update={"seed": seed})})
-            new = await asyncio.to_thread(create_twin_engine, s, seed)
-            with self.server.lock:
-                ctrl = self.server.controller
-                old = ctrl.engine
-                new.reset(ctrl.measured.q)
-                new.set_digital_outputs(ctrl.do_mask | (ctrl.tool_do_mask << 32))
-                ctrl.engine = new
+        async def swap_camera(engine: TwinEngine) -> None:
             if self.camera is not None:
-                cam = await asyncio.to_thread(TwinCamera, new, seed)
+                cam = await asyncio.to_thread(TwinCamera, engine, seed)
                 old_cam = self.camera.swap(cam)
                 await asyncio.to_thread(old_cam.close)
-            await asyncio.to_thread(old.close)
-            self.seed = seed
-            self.resets += 1
-            log.info("new twin scene, seed %d", seed)
-            return seed
+
+        await self._reset(seed, swap_camera)
+        self.seed = seed
+        self.resets += 1
+        log.info("new twin scene, seed %d", seed)
+        return seed
 
 
 async def request_scene_reset(
