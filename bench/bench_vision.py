@@ -14,7 +14,8 @@ import numpy as np
 
 from services.common.settings import VisionSettings
 from services.vision.pipeline import VisionPipeline
-from services.vision.synthetic import NoiseModel, d435_intrinsics, random_scene, render_scene
+from services.vision.synthetic import NoiseModel, d435_intrinsics, render_scene
+from services.vision.synthetic_scenes import random_scene
 
 N_SCENES = 12
 REPEATS = 5

@@ -18,7 +18,8 @@ from services.kinematics.analytic import fk
 from services.kinematics.robot_models import get_robot
 from services.vision.calibration import read_calibration
 from services.vision.replay import record_frames
-from services.vision.synthetic import NoiseModel, random_scene, render_scene
+from services.vision.synthetic import NoiseModel, render_scene
+from services.vision.synthetic_scenes import random_scene
 
 runner = CliRunner()
 

@@ -8,7 +8,8 @@ import pytest
 from services.common.settings import CubeDetectionSettings, ObstacleRuleSettings, VisionSettings
 from services.vision.cubes import classify_color
 from services.vision.pipeline import VisionPipeline
-from services.vision.synthetic import COLORS_RGB, NoiseModel, random_scene, render_scene
+from services.vision.synthetic import COLORS_RGB, NoiseModel, render_scene
+from services.vision.synthetic_scenes import random_scene
 
 N_SCENES = 50
 CENTROID_TOL_M = 0.005

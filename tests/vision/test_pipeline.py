@@ -13,7 +13,8 @@ from services.common.sensors import CameraIntrinsics, RGBDFrame
 from services.common.settings import VisionSettings
 from services.vision.overlay import draw_detections, encode_jpeg, overlay_jpeg
 from services.vision.pipeline import VisionPipeline, validate_frame
-from services.vision.synthetic import NoiseModel, random_scene, render_scene
+from services.vision.synthetic import NoiseModel, render_scene
+from services.vision.synthetic_scenes import random_scene
 
 
 @pytest.fixture(scope="module")

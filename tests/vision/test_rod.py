@@ -17,9 +17,9 @@ from services.vision.synthetic import (
     SyntheticScene,
     d435_intrinsics,
     look_at_camera,
-    random_scene,
     render_scene,
 )
+from services.vision.synthetic_scenes import random_scene
 
 N_SCENES = 50
 CENTER_TOL_M = 0.003

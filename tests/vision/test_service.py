@@ -26,7 +26,8 @@ from services.common.settings import CameraSourceSettings
 from services.vision.realsense import RealSenseCamera
 from services.vision.replay import ReplayCamera, record_frames
 from services.vision.service import VisionService, load_T_base_camera, make_camera
-from services.vision.synthetic import NoiseModel, random_scene, render_scene
+from services.vision.synthetic import NoiseModel, render_scene
+from services.vision.synthetic_scenes import random_scene
 
 pytestmark = pytest.mark.integration
 
