@@ -10,7 +10,9 @@
 - Connection loss fails pending requests at once; the next request reconnects
   with capped, jittered backoff and a bounded number of attempts.
 - Motion completion is awaited from the feedback stream (CurrentCommandId and
-  RobotMode) with a deadline — never a sleep loop.
+  RobotMode) with a deadline — never a sleep loop. Every deadline about the arm is
+  on the controller's clock (the packets' TimeStamp), with a generous wall-clock
+  guard only against a controller whose clock has stopped.
 
 The API is SI (radians, metres, 4x4 transforms); degrees and millimetres exist
 only in the strings this module sends and parses.
@@ -114,6 +116,21 @@ class FeedbackState:
 class _Pending:
     command: str
     future: asyncio.Future[dobot.Reply]
+
+
+class _ControllerDeadline(Exception):
+    """A wait's deadline passed on the controller's clock (turned into TimeoutError)."""
+
+
+# The wall-clock guard of a controller-clock wait: only for a controller whose clock stops while its
+# packets still come (a dead link is caught sooner, by the feedback timeout). Generous on purpose: a
+# simulator on a loaded machine legitimately runs its clock many times slower than the wall.
+WALL_GUARD_MIN_S = 30.0
+WALL_GUARD_FACTOR = 20.0
+
+
+def _wall_guard_s(controller_timeout_s: float) -> float:
+    return WALL_GUARD_MIN_S + WALL_GUARD_FACTOR * controller_timeout_s
 
 
 def _backoff(attempt: int, rs: ReconnectSettings) -> float:
@@ -370,16 +387,55 @@ class DobotClient:
     async def wait_feedback(
         self, predicate: Callable[[FeedbackState], bool], timeout_s: float
     ) -> FeedbackState:
-        """Wait until a packet satisfies ``predicate`` (TimeoutError after ``timeout_s``; a silent
-        feedback stream is a RobotCommunicationError instead)."""
-        fb = self._feedback
+        """Wait until a packet satisfies ``predicate``, ``timeout_s`` of controller time at most
+        (:meth:`wait_controller`)."""
+        return await self.wait_controller(predicate, timeout_s)
+
+    async def wait_controller(
+        self,
+        predicate: Callable[[FeedbackState], bool],
+        controller_timeout_s: float,
+        *,
+        since_ms: int | None = None,
+        wall_guard_s: float | None = None,
+    ) -> FeedbackState:
+        """Wait until a packet satisfies ``predicate``; the deadline is on the controller's clock (the
+        packets' TimeStamp, from ``since_ms`` or the newest packet's stamp), so a busy machine or a
+        simulator at N× waits exactly as long as the arm does.
+
+        TimeoutError when a packet stamped past the deadline still fails ``predicate``;
+        RobotCommunicationError when the stream goes silent, or when its clock does not reach the
+        deadline within ``wall_guard_s`` of wall time (a frozen controller, not a slow one)."""
+        fb = self._feedback if self._feedback is not None else await self.next_feedback()
+        start_ms = fb.timestamp_ms if since_ms is None else since_ms
+        deadline_ms = start_ms + controller_timeout_s * 1000.0
+        guard = wall_guard_s if wall_guard_s is not None else _wall_guard_s(controller_timeout_s)
         try:
-            async with asyncio.timeout(timeout_s):
-                while fb is None or not predicate(fb):
+            async with asyncio.timeout(guard):
+                while not predicate(fb):
+                    if fb.timestamp_ms >= deadline_ms:
+                        raise _ControllerDeadline
                     fb = await self.next_feedback(self.feedback_timeout_s)
+        except _ControllerDeadline:
+            raise TimeoutError(
+                f"feedback condition not met within {controller_timeout_s:.2f}s of controller time"
+            ) from None
         except TimeoutError:
-            raise TimeoutError(f"feedback condition not met within {timeout_s:.2f}s") from None
+            raise RobotCommunicationError(
+                f"the controller clock at {self.host}:{self.feedback_port} did not advance "
+                f"{controller_timeout_s:.2f}s within {guard:.0f}s of wall time"
+            ) from None
         return fb
+
+    async def wait_controller_time(self, duration_s: float, since_ms: int | None = None) -> FeedbackState:
+        """Wait until the controller's clock has run ``duration_s`` past ``since_ms`` (default: the
+        newest packet's stamp): a physical delay the controller cannot report (jaw travel), timed as
+        the arm experiences it. Returns the first packet stamped at or after that instant."""
+        fb = self._feedback if self._feedback is not None else await self.next_feedback()
+        until_ms = (fb.timestamp_ms if since_ms is None else since_ms) + duration_s * 1000.0
+        return await self.wait_controller(
+            lambda f: f.timestamp_ms >= until_ms, duration_s + 1.0, since_ms=since_ms
+        )
 
     # ------------------------------------------------------------------ requests
     async def raw_request(self, command: str, timeout_s: float | None = None) -> dobot.Reply:
@@ -534,38 +590,46 @@ class DobotClient:
         return ids, ", ".join(f"{i}: {dobot.describe_alarm(i)}" for i in ids) or "no alarm IDs reported"
 
     async def wait_motion_done(self, result_id: int | None, timeout_s: float) -> FeedbackState:
-        """Wait until the queue command ``result_id`` finished and the arm is idle.
+        """Wait until the queue command ``result_id`` finished and the arm is idle; ``timeout_s`` is
+        controller time (the packets' TimeStamp).
 
         Raises ControllerError when the controller alarms (with its alarm IDs),
         EmergencyStopError on e-stop, ExecutionError if the arm is disabled, and
-        TrajectoryExecutionError when the deadline passes.
+        TrajectoryExecutionError when the deadline passes on the controller's clock, and
+        RobotCommunicationError when that clock stalls (see :meth:`wait_controller`).
         """
-        loop = asyncio.get_running_loop()
-        deadline = loop.time() + timeout_s
+        fb = self._feedback if self._feedback is not None else await self.next_feedback()
+        deadline_ms = fb.timestamp_ms + timeout_s * 1000.0
         seen_running = False
-        while True:
-            remaining = deadline - loop.time()
-            if remaining <= 0:
-                fb = self._feedback
-                raise TrajectoryExecutionError(
-                    f"motion {result_id} not finished within {timeout_s:.1f}s "
-                    f"(mode {RobotMode.name_of(fb.robot_mode) if fb else '?'}, "
-                    f"current command {fb.current_command_id if fb else '?'})"
-                )
-            fb = await self.next_feedback(min(remaining, max(self.feedback_timeout_s, 0.05)))
-            if fb.estop:
-                raise EmergencyStopError("emergency stop is active; motion aborted")
-            if fb.in_error:
-                ids, text = await self.describe_alarms()
-                raise ControllerError(
-                    f"controller alarm during motion {result_id}: {text}", alarms=tuple(ids)
-                )
-            if fb.robot_mode == RobotMode.DISABLED:
-                raise ExecutionError(f"robot was disabled during motion {result_id}")
-            if fb.robot_mode == RobotMode.RUNNING:
-                seen_running = True
-            if fb.robot_mode == RobotMode.ENABLE:
-                if result_id is not None and fb.current_command_id >= result_id:
-                    return fb
-                if result_id is None and seen_running:
-                    return fb
+        try:
+            async with asyncio.timeout(_wall_guard_s(timeout_s)):
+                while True:
+                    fb = await self.next_feedback(self.feedback_timeout_s)
+                    if fb.estop:
+                        raise EmergencyStopError("emergency stop is active; motion aborted")
+                    if fb.in_error:
+                        ids, text = await self.describe_alarms()
+                        raise ControllerError(
+                            f"controller alarm during motion {result_id}: {text}", alarms=tuple(ids)
+                        )
+                    if fb.robot_mode == RobotMode.DISABLED:
+                        raise ExecutionError(f"robot was disabled during motion {result_id}")
+                    if fb.robot_mode == RobotMode.RUNNING:
+                        seen_running = True
+                    if fb.robot_mode == RobotMode.ENABLE:
+                        if result_id is not None and fb.current_command_id >= result_id:
+                            return fb
+                        if result_id is None and seen_running:
+                            return fb
+                    if fb.timestamp_ms >= deadline_ms:
+                        raise TrajectoryExecutionError(
+                            f"motion {result_id} not finished within {timeout_s:.1f}s of controller time "
+                            f"(mode {RobotMode.name_of(fb.robot_mode)}, "
+                            f"current command {fb.current_command_id})"
+                        )
+        except TimeoutError:
+            raise RobotCommunicationError(
+                f"the controller clock at {self.host}:{self.feedback_port} did not advance "
+                f"{timeout_s:.1f}s within {_wall_guard_s(timeout_s):.0f}s of wall time "
+                f"(motion {result_id})"
+            ) from None

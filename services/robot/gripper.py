@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import asyncio
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -25,17 +24,28 @@ class Gripper(Protocol):
     def state(self) -> GripperState: ...
 
 
+# With an object input mapped, a close that holds nothing is known once the jaws have had this many
+# times their actuation time (controller time) without the input: the twin's fingers take 0.32–0.43 s
+# of controller time for the configured 0.4 s, so the plain actuation time would cut a real grasp short.
+EMPTY_CLOSE_FACTOR = 2.0
+
+
 class DigitalOutputGripper:
     """Close = ``close_do`` ON (+ ``open_do`` OFF); open = the reverse. The DOs are queued
     commands, so they take effect after motion already queued, like the controller's own
-    program would; then the jaws get ``actuation_time_s`` to move (a physical delay the
-    controller cannot report), or, when a DI is mapped, the wait ends on that input."""
+    program would. Every wait is on the controller's clock (the feedback TimeStamp), counted from
+    the packet that reports the DO command done: a close ends on the object DI when one is mapped
+    (or after ``EMPTY_CLOSE_FACTOR`` × ``actuation_time_s`` without it: closed on nothing), else after
+    ``actuation_time_s``; an open after ``actuation_time_s``. An open of jaws this gripper has
+    already opened sends nothing."""
 
     def __init__(self, client: DobotClient, settings: GripperSettings, command_timeout_s: float = 10.0):
         self._client = client
         self._s = settings
         self._closed = False
+        self._known_open = False  # opened by this object and not commanded since
         self._timeout = command_timeout_s
+        self.opens_skipped = 0
 
     def state(self) -> GripperState:
         return GripperState(self._closed, self._object_detected())
@@ -48,6 +58,10 @@ class DigitalOutputGripper:
 
     async def _set(self, close: bool) -> GripperState:
         s = self._s
+        if not close and self._known_open:
+            self.opens_skipped += 1
+            return self.state()
+        self._known_open = False
         try:
             ids = []
             if s.open_do is not None and close:
@@ -55,22 +69,23 @@ class DigitalOutputGripper:
             ids.append(await self._client.digital_output(s.close_do, close, s.tool_outputs))
             if s.open_do is not None and not close:
                 ids.append(await self._client.digital_output(s.open_do, True, s.tool_outputs))
-            last = ids[-1]
-            await self._client.wait_motion_done(last, self._timeout)
+            done = await self._client.wait_motion_done(ids[-1], self._timeout)
+            self._closed = close
+            if close and s.object_di is not None:
+                object_bit = s.object_di - 1
+                try:
+                    await self._client.wait_controller(
+                        lambda fb: bool((fb.digital_inputs >> object_bit) & 1),
+                        EMPTY_CLOSE_FACTOR * s.actuation_time_s,
+                        since_ms=done.timestamp_ms,
+                    )
+                except TimeoutError:
+                    pass  # no object in the jaws: reported through object_detected, decided by the caller
+            elif s.actuation_time_s > 0:  # jaw travel: nothing to observe but the controller's clock
+                await self._client.wait_controller_time(s.actuation_time_s, since_ms=done.timestamp_ms)
         except RobotCommunicationError as exc:
             raise GripperError(f"gripper {'close' if close else 'open'} failed: {exc}") from exc
-        self._closed = close
-        if close and s.object_di is not None:
-            object_bit = s.object_di - 1
-            try:
-                await self._client.wait_feedback(
-                    lambda fb: bool((fb.digital_inputs >> object_bit) & 1),
-                    max(s.actuation_time_s, 0.05),
-                )
-            except TimeoutError:
-                pass  # no object in the jaws: reported through object_detected, decided by the caller
-        elif s.actuation_time_s > 0:
-            await asyncio.sleep(s.actuation_time_s)  # jaw travel time: nothing to observe
+        self._known_open = not close
         return self.state()
 
     async def close(self) -> GripperState:

@@ -186,3 +186,34 @@ async def test_feedback_rate_and_slow_port(sim_server):
         steps = await _controller_periods_ms(slow, 4)
         assert 190 <= statistics.median(steps) <= 210, str(steps)
     assert np.allclose(slow.feedback.q, HOME, atol=1e-9)
+
+
+async def test_wait_deadlines_are_controller_time():
+    # A controller whose clock runs at a quarter of the wall (a busy machine): a 0.2 s wait lasts 0.2 s
+    # of its clock, judged by the stamps the waiting saw, and ends as TimeoutError (the link is fine).
+    from services.kinematics.robot_models import NOVA5
+    from services.sim.controller import SimController
+    from services.sim.dobot_server import SimDobotServer
+    from services.sim.engine import KinematicEngine
+
+    sim = SimDobotServer(
+        SimController(NOVA5, KinematicEngine(), q0=HOME), "127.0.0.1", 0, 0, None, speed=0.25
+    )
+    async with sim, make_client(sim) as c:
+        stamps: list[int] = []
+        start = (await c.next_feedback()).timestamp_ms
+        with pytest.raises(TimeoutError, match="controller time"):
+            await c.wait_controller(
+                lambda fb: stamps.append(fb.timestamp_ms) is not None, 0.2, since_ms=start
+            )
+        assert stamps[-1] - start >= 200
+        assert stamps[-1] - start <= 200 + 8 * 3  # ended at the first packets past the deadline
+        fb = await c.wait_controller_time(0.1)
+        assert fb.timestamp_ms - stamps[-1] >= 100
+
+
+async def test_wait_on_a_stopped_controller_clock_is_a_link_error(sim_server):
+    async with make_client(sim_server) as c:
+        # the clock thread blocks on the controller's lock: packets stop, the clock with them
+        with sim_server.lock, pytest.raises(RobotCommunicationError):
+            await c.wait_controller(lambda fb: False, 0.5, wall_guard_s=0.3)
