@@ -97,6 +97,19 @@ class CellMetrics:
             registry=r,
             multiprocess_mode=LIVE_GAUGE_MODE,
         )
+        # the simulated controller: sim seconds per wall second it achieved (below its --speed when the
+        # machine is too busy: it slows its clock rather than drop ticks), and the ticks that came late
+        self.sim_clock_speed = Gauge(
+            "sim_clock_speed_ratio",
+            "Sim time per wall time the simulated controller achieved over the last window",
+            registry=r,
+            multiprocess_mode=LIVE_GAUGE_MODE,
+        )
+        self.sim_late_ticks = Counter(
+            "sim_clock_late_ticks",
+            "Simulated controller ticks that started after their wall time",
+            registry=r,
+        )
 
     def observe_pick(
         self,

@@ -79,12 +79,11 @@ class SimController:
         engine: MotionEngine,
         config: ControllerConfig | None = None,
         q0: np.ndarray | None = None,
-        clock_ms: Callable[[], int] = _wall_ms,
+        clock_ms: Callable[[], int] = _wall_ms,  # read once: the epoch of the controller's clock
     ):
         self.spec = spec
         self.engine = engine
         self.config = config or ControllerConfig()
-        self._clock_ms = clock_ms
         self.mode_base = RobotMode.DISABLED  # mode without the alarm overlay
         self.enabled = False
         self.estop = False
@@ -105,6 +104,8 @@ class SimController:
         self.qdd_ref = np.zeros(spec.dof)
         self.engine.reset(q)
         self.measured = EngineState(q=q.copy(), qd=np.zeros(spec.dof))
+        # The controller's clock is sim time: TimeStamp = the wall clock at boot + the sim time since,
+        # so every stamp agrees with the ticks that produced it whatever the machine's load or speed.
         self.boot_ms = clock_ms()
         self.commands_handled = 0
         self._feedback = dobot.new_feedback()
@@ -143,6 +144,11 @@ class SimController:
         self.engine.hold()
 
     # ------------------------------------------------------------------ clock
+    @property
+    def clock_ms(self) -> int:
+        """The controller's clock (ms): boot time + sim time, never the wall clock after boot."""
+        return self.boot_ms + round(self.sim_time * 1000.0)
+
     def tick(self, dt: float) -> None:
         """Advance sim time by dt: queue, reference, engine, alarms, feedback record."""
         self.sim_time += dt
@@ -211,8 +217,8 @@ class SimController:
     def _refresh_feedback(self) -> None:
         rec = self._feedback
         q_deg = np.rad2deg(self.measured.q)
-        rec["TimeStamp"] = self._clock_ms()
-        rec["RunTime"] = max(0, self._clock_ms() - self.boot_ms)
+        rec["RunTime"] = self.clock_ms - self.boot_ms
+        rec["TimeStamp"] = self.clock_ms
         rec["RobotMode"] = int(self.mode)
         rec["DigitalOutputs"] = self.do_mask
         rec["DigitalInputs"] = self.measured.digital_inputs

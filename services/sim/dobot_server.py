@@ -3,7 +3,12 @@ slow feedback (30005, 200 ms) on loopback, around a :class:`SimController`.
 
 A clock thread ticks the controller in sim time (``speed`` × real time, or as
 fast as possible with ``speed=0``) and hands every feedback packet to the event
-loop, which writes it whole to each connected client.
+loop, which writes it whole to each connected client. Every tick advances sim time
+by one period and every packet is stamped with that sim time (the controller's
+clock), so the feedback and the simulated world never disagree. When the machine
+cannot keep ``speed`` the clock slows (no tick is dropped, none skipped ahead): the
+:class:`ClockPacer` makes up a short lag, beyond it re-anchors, and the server logs
+and exports the speed it achieved.
 """
 
 from __future__ import annotations
@@ -14,7 +19,9 @@ import logging
 import threading
 import time
 from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
 
+from services.common.metrics import CellMetrics
 from services.common.shell import ServiceShell
 from services.dobot import CommandFramer
 from services.sim.controller import SimController
@@ -22,6 +29,56 @@ from services.sim.controller import SimController
 log = logging.getLogger("pickplace.sim.server")
 
 MAX_BACKLOG_BYTES = 1440 * 256  # drop packets for a client that stops reading
+CATCH_UP_S = 0.05  # wall lag made up by ticking back-to-back; beyond it the sim clock slows instead
+SPEED_WINDOW_S = 2.0  # wall seconds over which the achieved speed is measured
+SLOW_WARNING_EVERY_S = 30.0
+SLOW_RATIO = 0.95  # achieved below this share of the asked speed: say so
+
+
+@dataclass
+class ClockPacer:
+    """When each tick is due on the wall clock (pure: the caller reads the clock). A tick that comes
+    late is still one period of sim time; a lag beyond ``max_lag_s`` is given up (the sim clock slowed),
+    never made up by jumping sim time."""
+
+    period_s: float  # sim seconds per tick
+    speed: float  # sim time per wall time; 0 = as fast as possible
+    next_wall_s: float
+    max_lag_s: float = CATCH_UP_S
+    late_ticks: int = 0
+    given_up_s: float = 0.0  # wall seconds of lag the clock gave up (it ran slower than ``speed``)
+
+    def after_tick(self, now_s: float) -> float:
+        """A tick just ran at ``now_s``: the wall delay before the next one (0 = at once)."""
+        if self.speed <= 0:
+            return 0.0
+        self.next_wall_s += self.period_s / self.speed
+        delay = self.next_wall_s - now_s
+        if delay < 0:
+            self.late_ticks += 1
+            if -delay > self.max_lag_s:
+                self.given_up_s += -delay
+                self.next_wall_s = now_s
+            return 0.0
+        return delay
+
+
+@dataclass
+class SpeedWindow:
+    """The sim speed achieved over windows of ``window_s`` wall seconds (pure)."""
+
+    window_s: float
+    wall0_s: float
+    sim0_s: float
+    achieved: float | None = None
+
+    def update(self, wall_s: float, sim_s: float) -> float | None:
+        """The achieved speed when a window closed at this call, else None."""
+        if wall_s - self.wall0_s < self.window_s:
+            return None
+        self.achieved = (sim_s - self.sim0_s) / (wall_s - self.wall0_s)
+        self.wall0_s, self.sim0_s = wall_s, sim_s
+        return self.achieved
 
 
 class SimDobotServer(ServiceShell):
@@ -39,6 +96,7 @@ class SimDobotServer(ServiceShell):
         period_s: float = 0.008,
         slow_period_s: float = 0.2,
         speed: float = 1.0,
+        metrics: CellMetrics | None = None,
     ):
         super().__init__()
         self.controller = controller
@@ -56,6 +114,9 @@ class SimDobotServer(ServiceShell):
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self.ticks = 0
+        self.late_ticks = 0
+        self.achieved_speed: float | None = None  # over the last SPEED_WINDOW_S of wall time
+        self.metrics = metrics
         self.ports: dict[str, int] = {}
 
     async def _start(self, stack: contextlib.AsyncExitStack) -> None:
@@ -115,8 +176,9 @@ class SimDobotServer(ServiceShell):
     # ------------------------------------------------------------------ clock thread
     def _clock(self) -> None:
         period = self.period_s
-        wall_period = period / self.speed if self.speed > 0 else 0.0
-        next_t = time.perf_counter()
+        pacer = ClockPacer(period, self.speed, time.perf_counter())
+        window = SpeedWindow(SPEED_WINDOW_S, pacer.next_wall_s, self.controller.sim_time)
+        warned_at = -SLOW_WARNING_EVERY_S
         while not self._stop.is_set():
             with self.lock:
                 try:
@@ -124,20 +186,42 @@ class SimDobotServer(ServiceShell):
                 except Exception:
                     log.exception("controller tick failed")
                 packet = self.controller.feedback_bytes()
+                sim_now = self.controller.sim_time
             self.ticks += 1
             slow = self.ticks % self.slow_every == 0
             loop = self._loop
             if loop is not None:
                 with contextlib.suppress(RuntimeError):
                     loop.call_soon_threadsafe(self._broadcast, packet, slow)
-            if wall_period > 0:
-                next_t += wall_period
-                delay = next_t - time.perf_counter()
-                if delay > 0:
-                    self._stop.wait(delay)
-                elif delay < -0.25:  # far behind (debugger, overload): don't try to catch up
-                    next_t = time.perf_counter()
-            else:
+            now = time.perf_counter()
+            late_before = pacer.late_ticks
+            delay = pacer.after_tick(now)
+            if pacer.late_ticks > late_before:
+                self.late_ticks = pacer.late_ticks
+                if self.metrics is not None:
+                    self.metrics.sim_late_ticks.inc()
+            achieved = window.update(now, sim_now)
+            if achieved is not None:
+                self.achieved_speed = achieved
+                if self.metrics is not None:
+                    self.metrics.sim_clock_speed.set(achieved)
+                if (
+                    self.speed > 0
+                    and achieved < SLOW_RATIO * self.speed
+                    and now - warned_at > SLOW_WARNING_EVERY_S
+                ):
+                    warned_at = now
+                    log.warning(
+                        "the machine cannot keep --speed %.2g: the sim clock slowed to %.2f× over the last "
+                        "%.0f s (%d late ticks so far); feedback stays stamped in sim time",
+                        self.speed,
+                        achieved,
+                        SPEED_WINDOW_S,
+                        pacer.late_ticks,
+                    )
+            if delay > 0:
+                self._stop.wait(delay)
+            elif self.speed <= 0:
                 time.sleep(0)
 
     def _broadcast(self, packet: bytes, slow: bool) -> None:

@@ -69,7 +69,9 @@ def test_feedback_consistent_with_fk(ctrl):
     # spec reference: q = (10,20,30,40,50,60)° → (−468.557, −277.357, 895.660) mm
     assert np.allclose(rec["ToolVectorActual"][:3], [-468.557, -277.357, 895.660], atol=0.01)
     assert int(rec["EnableStatus"]) == 1 and int(rec["CRRobotType"]) == 103
-    assert int(rec["TimeStamp"]) == 1_700_000_000_000
+    # the controller's clock is sim time from the boot epoch: 5 s of ticks later, 5 s later in the stamp
+    assert int(rec["TimeStamp"]) == 1_700_000_000_000 + round(ctrl.sim_time * 1000)
+    assert int(rec["RunTime"]) == round(ctrl.sim_time * 1000) >= 5000
 
 
 def test_joint_limit_alarm_then_clear(ctrl):
