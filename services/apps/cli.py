@@ -15,6 +15,7 @@ from rich.console import Console
 from rich.table import Table
 
 from gateway.cli import db_app
+from services.apps.calibration_cli import app as calibration_app
 from services.apps.vision_cli import app as vision_app
 from services.common.aio import run_until_signal
 from services.common.bus import Bus
@@ -40,7 +41,8 @@ robot_app = typer.Typer(
 app.add_typer(robot_app, name="robot")
 app.add_typer(db_app, name="db")  # the gateway's `pickplace db upgrade|downgrade|current`
 app.add_typer(twin_app)  # sim-scene, sim-mjcf
-app.add_typer(vision_app)  # vision-detect, record, calibrate, calibrate-manual, calibration-check
+app.add_typer(vision_app)  # vision-detect, record
+app.add_typer(calibration_app)  # calibrate, calibrate-manual, calibration-check
 console = Console()
 log = logging.getLogger("pickplace.cli")
 

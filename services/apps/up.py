@@ -117,7 +117,7 @@ def _calibration_executor(cell: Cell):  # type: ignore[no-untyped-def]
     the gripper (in the twin: ``sim.twin.calibration_board: true``), on the cell's own camera and robot.
     The result is stored by the gateway; the calibration file is written only by `pickplace calibrate`."""
     from gateway.calibration import CalibrationOutcome
-    from services.apps.vision_cli import GrpcCalibrationRobot
+    from services.apps.calibration_cli import GrpcCalibrationRobot
     from services.common.errors import InvalidInputError
     from services.vision.calibrate_workflow import run_calibration
 

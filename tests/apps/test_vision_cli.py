@@ -11,7 +11,8 @@ import pytest
 from pickplace.v1 import robot_pb2
 from typer.testing import CliRunner
 
-from services.apps.vision_cli import GrpcCalibrationRobot, app
+from services.apps.calibration_cli import GrpcCalibrationRobot
+from services.apps.cli import app
 from services.common.errors import IKFailureError
 from services.common.settings import load_settings
 from services.kinematics.analytic import fk

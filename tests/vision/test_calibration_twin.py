@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from services.apps.vision_cli import GrpcCalibrationRobot
+from services.apps.calibration_cli import GrpcCalibrationRobot
 from services.common.frames import invert_transform, make_transform
 from services.common.settings import Settings
 from services.robot.service import RobotService
@@ -93,7 +93,7 @@ async def test_calibration_in_the_twin_recovers_the_true_camera_pose(tmp_path) -
 def test_calibrate_cli_with_the_twin_source_writes_the_true_pose(tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
     from typer.testing import CliRunner
 
-    from services.apps.vision_cli import app
+    from services.apps.cli import app
     from services.common.settings import load_settings
 
     monkeypatch.setenv("PICKPLACE_SIM__SPEED", "3")
