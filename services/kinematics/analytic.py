@@ -22,15 +22,19 @@ general. With T1 the target seen from J1 without O7, n = Rz(θ1) O2 e_z the J2�
 
 1. the offset of the flange along n is fixed: n·(p_T1 − μ z_T1) = δ, i.e. A cos θ1 + B sin θ1 = C:
    two θ1 (the shoulder branches);
-2. n seen from the flange depends on θ5, θ6 alone: its z part gives cos θ5 (two θ5, the wrist
-   branches), its xy angle θ6;
+2. n seen from the flange depends on θ5, θ6 alone: its z part gives cos θ5 and its xy part
+   |sin θ5| (two θ5, the wrist branches; atan2 of the two stays accurate next to the wrist
+   singularity, where acos would lose half the digits), its xy angle θ6;
 3. what is left after Rz(θ2) is a planar 2-link arm: two θ3 (the elbow branches), θ2, θ4.
 
-Up to 8 solutions, exact to rounding (~1e-15 m on the arm's model). A cosine that comes out just
-beyond ±1 (a pose at a boundary, or up to 1e-6 beyond it) is clipped, and that solution is kept only
-if FK on the chain reproduces the pose within ``tol``; no other solution needs a check. Solutions
-that fall together there are returned once, and those within :data:`SINGULAR_RAD` of the shoulder,
-elbow or wrist singularity carry a :class:`Singularity` flag.
+Up to 8 solutions, exact to rounding (≤ 1e-11 m, ~1e-15 rad on the arm's model, also next to a
+singularity) with no check needed. Only a cosine that comes out beyond ±1 by more than rounding (a
+pose at a boundary, e.g. the wrist at θ5 = ±π with the elbow folded, where θ6 is ill-determined but
+the elbow cannot take up its error, or a pose up to 1e-6 beyond the workspace) is clipped; that
+solution is refined by Gauss–Newton steps on the chain (minimum-norm, so the singular Jacobian
+there does no harm) and kept if it then reproduces the pose within ``tol`` (for a reachable pose:
+exactly). Solutions within :data:`SINGULAR_RAD` of the shoulder, elbow or wrist singularity carry a
+:class:`Singularity` flag, and two of them closer than :data:`DUPLICATE_RAD` are returned once.
 
 UR frames: the base here (``base_link`` in our URDFs) is UR's controller ``base`` frame (URScript
 poses), i.e. ROS ur_description's ``base_link`` turned 180° about z.
@@ -60,8 +64,9 @@ SINGULAR_RAD = 1e-6
 CLIP_SLACK = 1e-6
 # Beyond ±1 by no more than this is rounding: the clipped solution is exact without a check.
 _ROUNDING = 1e-12
-# Solutions closer than this (max over joints, rad) are one solution.
-DUPLICATE_RAD = 1e-9
+# Two solutions at a singularity closer than this in every joint are one solution: there the pose
+# fixes the joints no better (at a folded elbow θ3 to √ε ≈ 1e-7 rad, and θ2, θ4 to ~12 times that).
+DUPLICATE_RAD = 1e-5
 _PI = math.pi
 _TWO_PI = 2.0 * math.pi
 
@@ -443,6 +448,7 @@ def _closed_form(
     t2x, t2y, t2z = cf.t2x, cf.t2y, cf.t2z
     ca5, sa5, ca6, sa6 = cf.ca5, cf.sa5, cf.ca6, cf.sa6
     k5s = -sa5 * sa6
+    abs_sa5 = abs(sa5)
     c56 = ca5 * ca6
     tau5x, tau5y, tau5z = cf.tau5
     tau6x, tau6y, tau6z = cf.tau6
@@ -484,9 +490,15 @@ def _closed_form(
                 continue
             clipped5 = clipped5 or abs(c5) > 1.0 + _ROUNDING
             c5 = 1.0 if c5 > 0.0 else -1.0
-        th5a = acos(c5)
+        # sin θ5 from the xy part of n (its size is |sin θ5| sin α5 beside a tiny term): accurate where
+        # acos(c5) is not, next to the wrist singularity
+        ky0 = ca6 * sa5 * c5 + sa6 * ca5
+        s5a = sqrt(max(0.0, m20 * m20 + m21 * m21 - ky0 * ky0)) / abs_sa5
+        th5a = atan2(s5a, c5)
+        r5 = math.hypot(s5a, c5)
+        c5, s5a = c5 / r5, s5a / r5
         n_angle = atan2(m21, m20)
-        for th5 in (th5a, -th5a):
+        for th5, sn5 in ((th5a, s5a), (-th5a, -s5a)):
             v5 = (th5 - k5) % tau + b5
             if limited:
                 if v5 > h5:
@@ -495,7 +507,6 @@ def _closed_form(
                     v5 += tau
                 if not le5 <= v5 <= he5:
                     continue
-            sn5 = sin(th5)
             # k = Rx(−α6) Rz(−θ5) Rx(−α5) e_z: n seen from the flange before θ6 turns it
             kx, ky = sn5 * sa5, ca6 * sa5 * c5 + sa6 * ca5
             flag5 = flag1 | (4 if math.hypot(kx, ky) < SINGULAR_RAD else 0)
@@ -593,12 +604,52 @@ def _closed_form(
     return out, any_clipped, any_singular
 
 
-def _reproduces(ch: Chain, q: tuple[float, ...], T: Array, tol: float) -> bool:
-    """FK on the chain reproduces T within tol (m; rotation: Frobenius norm within 10·tol)."""
-    Tq = chain_fk(ch, np.asarray(q))
-    return bool(
-        np.linalg.norm(Tq[:3, 3] - T[:3, 3]) < tol and np.linalg.norm(Tq[:3, :3] - T[:3, :3]) < 10.0 * tol
-    )
+def _polish(ch: Chain, q0: tuple[float, ...], T: Array) -> tuple[tuple[float, ...], float, float]:
+    """Gauss–Newton on the chain from a clipped closed-form solution: (joints, position error m,
+    rotation error rad). Minimum-norm steps (least squares), so a Jacobian that is singular there
+    (the pose sits on a boundary) does no harm; for a reachable pose this ends exact to rounding."""
+    q = np.asarray(q0, dtype=float)
+    theta0 = np.asarray(ch.offsets)
+    pos = rot = math.inf
+    for _ in range(_POLISH_STEPS):
+        F = ch.origins[0]
+        axes, points = [], []
+        for i in range(6):
+            F = F @ _rz(q[i] + theta0[i])
+            axes.append(F[:3, 2])
+            points.append(F[:3, 3])
+            F = F @ ch.origins[i + 1]
+        dp = T[:3, 3] - F[:3, 3]
+        dR = T[:3, :3] @ F[:3, :3].T
+        w = 0.5 * np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0], dR[1, 0] - dR[0, 1]])
+        sw = float(np.linalg.norm(w))
+        angle = math.atan2(sw, (float(np.trace(dR)) - 1.0) / 2.0)
+        dw = w * (angle / sw) if sw > 1e-300 else w  # the rotation vector of dR
+        pos, rot = float(np.linalg.norm(dp)), angle
+        if pos < 1e-14 and rot < 1e-14:
+            break
+        z = np.array(axes)
+        J = np.vstack([np.cross(z, F[:3, 3] - np.array(points)).T, z.T])
+        q = q + np.linalg.lstsq(J, np.concatenate([dp, dw]), rcond=1e-12)[0]
+    return tuple(q.tolist()), pos, rot
+
+
+_POLISH_STEPS = 12  # Gauss–Newton steps for a clipped solution (quadratic: 3-4 are enough off a singularity)
+
+
+def _refined(
+    ch: Chain, sol: Solution, T: Array, tol: float, lower: list[float], upper: list[float]
+) -> Solution | None:
+    """A clipped solution polished on the chain; None when it does not reach the pose within tol
+    (or the polish left the limits, when ``lower``/``upper`` are given)."""
+    q, pos, rot = _polish(ch, sol[1], T)
+    if not (pos < tol and rot < tol):
+        return None
+    if lower and not all(lo - 1e-9 <= v <= hi + 1e-9 for v, lo, hi in zip(q, lower, upper, strict=True)):
+        return None
+    if not lower:
+        q = tuple((v + _PI) % _TWO_PI - _PI for v in q)
+    return (sol[0], q, sol[2], False)
 
 
 def _same(a: tuple[float, ...], b: tuple[float, ...]) -> bool:
@@ -625,13 +676,14 @@ def _solve(
     if T.shape != (4, 4):
         raise InvalidInputError(f"pose must be 4x4, got {T.shape}")
     sols, any_clipped, any_singular = _closed_form(cf, T.tolist(), seed, lower, upper)
-    if any_clipped:
+    if any_clipped:  # a pose at a boundary: polish the clipped solutions, keep those that reach it
         tol = max(tol, 1e-9)
-        sols = [s for s in sols if not s[3] or _reproduces(ch, s[1], T, tol)]
+        refined = [s if not s[3] else _refined(ch, s, T, tol, lower, upper) for s in sols]
+        sols = [s for s in refined if s is not None]
     if any_singular:  # only at a singularity can two branches be one solution
         kept: list[Solution] = []
         for s in sols:
-            if not any(_same(s[1], k[1]) for k in kept):
+            if not (s[2] and any(k[2] & s[2] and _same(s[1], k[1]) for k in kept)):
                 kept.append(s)
         return kept
     return sols
@@ -692,9 +744,12 @@ def _closed_form_batch(cf: _ClosedForm, T: Array) -> tuple[Array, Array, Array, 
     M = [r2[i] * Q[0] + r2[3 + i] * Q[1] + r2[6 + i] * Q[2] for i in range(3)]  # rows of R2ᵀ R_Q, (..., 2, 3)
     pm = [r2[i] * pq[0] + r2[3 + i] * pq[1] + r2[6 + i] * pq[2] for i in range(2)]
     c5, ok5, clip5 = _clip((M[2][..., 2] - cf.ca5 * cf.ca6) / (-cf.sa5 * cf.sa6))  # (..., 2)
-    th5a = np.arccos(c5)
+    ky0 = cf.ca6 * cf.sa5 * c5 + cf.sa6 * cf.ca5
+    s5a = np.sqrt(np.maximum(0.0, M[2][..., 0] ** 2 + M[2][..., 1] ** 2 - ky0**2)) / abs(cf.sa5)
+    th5a = np.arctan2(s5a, c5)
+    r5 = np.hypot(s5a, c5)
     th5 = np.stack([th5a, -th5a], axis=-1)  # (..., 2, 2)
-    s5, c5 = np.sin(th5), c5[..., None]
+    s5, c5 = np.stack([s5a / r5, -s5a / r5], axis=-1), (c5 / r5)[..., None]
     kx, ky = s5 * cf.sa5, cf.ca6 * cf.sa5 * c5 + cf.sa6 * cf.ca5
     flag5 = flag1[..., None, None] | np.where(np.hypot(kx, ky) < SINGULAR_RAD, 4, 0)
     th6 = np.arctan2(ky, kx) - np.arctan2(M[2][..., 1], M[2][..., 0])[..., None]
@@ -756,13 +811,13 @@ def _chain_ik_all(ch: Chain, T_base_flange: Array, tol: float) -> tuple[Array, A
     q = np.where(exists[..., None], (q + np.pi) % (2 * np.pi) - np.pi, 0.0)
     valid = exists.copy()
     check = exists & clipped
-    if check.any():  # poses at a boundary: keep a clipped solution only if it reproduces the pose
+    if check.any():  # poses at a boundary: polish the clipped solutions, keep those that reach it
         tol = max(tol, 1e-9)
-        Tq = chain_fk(ch, q[check])
-        Tt = np.broadcast_to(T[..., None, :, :], (*exists.shape, 4, 4))[check]
-        pos = np.linalg.norm(Tq[..., :3, 3] - Tt[..., :3, 3], axis=-1)
-        rot = np.linalg.norm(Tq[..., :3, :3] - Tt[..., :3, :3], axis=(-2, -1))
-        valid[check] = (pos < tol) & (rot < 10.0 * tol)
+        Tt = np.broadcast_to(T[..., None, :, :], (*exists.shape, 4, 4))
+        for idx in zip(*np.nonzero(check), strict=True):
+            qi, pos, rot = _polish(ch, tuple(q[idx].tolist()), Tt[idx])
+            valid[idx] = pos < tol and rot < tol
+            q[idx] = (np.asarray(qi) + np.pi) % (2 * np.pi) - np.pi
     return q, valid, np.where(valid, flags, 0)
 
 
