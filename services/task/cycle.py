@@ -8,8 +8,10 @@ cleared and the rest is replanned from where the arm stands (the object still in
 gripper if it was carried), a grasp that did not hold is retried with an adjusted grasp,
 and a safety stop hands over to the operator.
 
-Its waits and its clock are injected (``wait``, ``clock``): the service uses asyncio.sleep
-and the wall clock, tests a recorder and the fake controller's time.
+Its waits and its clocks are injected (``wait``, ``clock``, ``wall_clock``): stage and cycle
+durations are on ``clock`` — the controller's clock in the cell (its feedback TimeStamp), the fake
+controller's time in tests — and each state's wall time (what computing costs) on ``wall_clock``.
+Between cycles no state runs: the gap is charged to none.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import time
 import uuid
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field, replace
+from typing import cast
 
 import numpy as np
 
@@ -38,8 +41,10 @@ from services.task.plan import state_for
 from services.task.ports import (
     GraspPlan,
     GraspPort,
+    GripOutcome,
     MotionPort,
     Move,
+    MoveOutcome,
     Observation,
     PlannedWaypoint,
     RobotPort,
@@ -104,25 +109,24 @@ class Orchestrator:
         on_state: StateListener | None = None,
         wait: Wait = asyncio.sleep,
         clock: Callable[[], float] = time.perf_counter,
+        wall_clock: Callable[[], float] = time.perf_counter,
     ):
         self.vision, self.grasp, self.motion, self.robot = vision, grasp, motion, robot
         self.config = config or CycleConfig()
         self._on_state = on_state
         self._wait = wait  # between detection retries
-        self._clock = clock  # stage and cycle durations
+        self._clock = clock  # stage and cycle durations (the controller's clock in the cell)
+        self._wall_clock = wall_clock  # the wall time of each state beside it (compute runs on it)
         self.state = CycleState.IDLE
         self._outcome: PickOutcome | None = None
-        self._stage_t0 = 0.0
+        self._stage_t0: tuple[float, float] | None = None  # (clock, wall) at entry; None between cycles
         self._progress = Progress()
 
     # ------------------------------------------------------------------ bookkeeping
     def _enter(self, state: CycleState, message: str = "") -> None:
-        now = self._clock()
+        self._close_stage()
         out = self._outcome
-        if out is not None and self.state not in (CycleState.IDLE,):
-            key = self.state.value
-            out.stage_durations_s[key] = out.stage_durations_s.get(key, 0.0) + (now - self._stage_t0)
-        self._stage_t0 = now
+        self._stage_t0 = (self._clock(), self._wall_clock())
         self.state = state
         if out is not None and state not in (
             CycleState.ABORT,
@@ -135,6 +139,16 @@ class Orchestrator:
         log.info("state %s %s", state.value, message)
         if self._on_state is not None:
             self._on_state(state, message)
+
+    def _close_stage(self) -> None:
+        """Charge the time since the current state was entered to it (nothing between cycles)."""
+        out, t0 = self._outcome, self._stage_t0
+        if out is None or t0 is None or self.state is CycleState.IDLE:
+            return
+        key = self.state.value
+        out.stage_durations_s[key] = out.stage_durations_s.get(key, 0.0) + (self._clock() - t0[0])
+        out.stage_wall_s[key] = out.stage_wall_s.get(key, 0.0) + (self._wall_clock() - t0[1])
+        self._stage_t0 = None
 
     async def _timed(self, aw, seconds: float, what: str):  # type: ignore[no-untyped-def]
         try:
@@ -149,6 +163,8 @@ class Orchestrator:
         t0 = self._clock()
         out = PickOutcome(pick_id=uuid.uuid4().hex, task=task, object_class=task.object_class)
         self._outcome = out
+        self._stage_t0 = None  # what happened since the last cycle belongs to no state of this one
+        robot, self.robot = self.robot, cast(RobotPort, _RecordingRobot(self.robot, out))
         attempts = Attempts()
         self._enter(CycleState.INIT)
         try:
@@ -169,8 +185,10 @@ class Orchestrator:
             raise
         finally:
             out.attempts = attempts.total
+            self._close_stage()
             out.cycle_time_s = self._clock() - t0
             self._outcome = None
+            self.robot = robot
         return out
 
     async def _cycle(self, task: TaskKind, out: PickOutcome, attempts: Attempts) -> None:
@@ -469,6 +487,30 @@ def _move(plan: GraspPlan, i: int) -> Move | None:
         T[:3, 3] += w.guard_overtravel_m * w.guard_direction
     lifting_off = w.holding and i > 0 and not plan.waypoints[i - 1].holding
     return Move(MotionKind.LINEAR, T, held, slow=guarded, table_contact=lifting_off or guarded, label=w.name)
+
+
+class _RecordingRobot:
+    """The robot port, recording on the outcome what the cycle executed: the joint waypoints the arm
+    went through (each motion's start and where it ended) and the gripper actions."""
+
+    def __init__(self, robot: RobotPort, out: PickOutcome):
+        self._robot, self._out = robot, out
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(self._robot, name)
+
+    async def execute(self, traj: JointTrajectory, *args: object, **kwargs: object) -> MoveOutcome:
+        res: MoveOutcome = await self._robot.execute(traj, *args, **kwargs)  # type: ignore[arg-type]
+        wps = self._out.executed_waypoints
+        start = [float(v) for v in traj.positions[0]]
+        if not wps or max(abs(a - b) for a, b in zip(wps[-1], start, strict=True)) > 1e-6:
+            wps.append(start)
+        wps.append([float(v) for v in res.final_q])
+        return res
+
+    async def gripper(self, close: bool) -> GripOutcome:
+        self._out.gripper_actions += 1
+        return await self._robot.gripper(close)
 
 
 PLACED_TOP_CLEARANCE_M = 0.03

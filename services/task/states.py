@@ -68,11 +68,14 @@ class PickOutcome:
     failure_reason: str = ""
     error_code: str = ""
     attempts: int = 1
-    cycle_time_s: float = 0.0
+    cycle_time_s: float = 0.0  # on the orchestrator's clock: the controller's in the cell
     grasp_quality: float = 0.0
     pick_pose: list[float] | None = None  # x, y, z, qx, qy, qz, qw (base frame, m)
     place_pose: list[float] | None = None
-    stage_durations_s: dict[str, float] = field(default_factory=dict)
+    stage_durations_s: dict[str, float] = field(default_factory=dict)  # on the orchestrator's clock
+    stage_wall_s: dict[str, float] = field(default_factory=dict)  # the same states in wall time
+    executed_waypoints: list[list[float]] = field(default_factory=list)  # joints (rad) the arm went through
+    gripper_actions: int = 0
 
 
 @dataclass
