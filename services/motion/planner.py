@@ -422,3 +422,81 @@ class MotionPlanner:
         traj = self._timed(path, method or self.config.timing, notes=notes)
         t2 = time.perf_counter()
         return Plan(traj, path, how, t1 - t0, t2 - t1, notes)
+
+
+# --- blending -------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class BlendPart:
+    """One move of a blended run: the planner of its scene and options, and its checked joint path."""
+
+    planner: MotionPlanner
+    path: Array  # from the end of the previous part to this move's goal
+    line: bool  # a dense straight tool line (timed without the jerk limit, as plan_cartesian does)
+
+
+def _common_limits(parts: Sequence[BlendPart]) -> JointLimits:
+    """The tightest of the parts' limits: the slowest move of the run bounds the whole blend."""
+    lims = [p.planner.line_limits if any(q.line for q in parts) else p.planner.limits for p in parts]
+    jerks = [lim.max_jerk for lim in lims]
+    return dataclasses.replace(
+        lims[0],
+        max_velocity=np.min([lim.max_velocity for lim in lims], axis=0),
+        max_acceleration=np.min([lim.max_acceleration for lim in lims], axis=0),
+        max_jerk=None if any(j is None for j in jerks) else np.min(jerks, axis=0),
+    )
+
+
+def _pass_times(traj: JointTrajectory, points: Sequence[Array]) -> list[float]:
+    """When the trajectory passes each of ``points`` in order (the knot nearest each, searched
+    forward from the previous one): the spline goes through every path point."""
+    out, k0 = [], 0
+    for q in points:
+        d = np.max(np.abs(traj.positions[k0:] - q), axis=1)
+        k0 += int(np.argmin(d))
+        out.append(float(traj.times[k0]))
+    return out
+
+
+def _window(traj: JointTrajectory, t0: float, t1: float) -> JointTrajectory:
+    """The part of ``traj`` between t0 and t1, restarting at t = 0 (knots kept, ends sampled)."""
+    inner = traj.times[(traj.times > t0 + 1e-9) & (traj.times < t1 - 1e-9)]
+    ts = np.concatenate([[t0], inner, [t1]])
+    q, qd, qdd = traj.sample(ts)
+    if t1 >= traj.duration:  # the end of the whole: exactly its goal, at rest
+        q[-1], qd[-1], qdd[-1] = traj.positions[-1], 0.0, 0.0
+    return JointTrajectory(traj.joint_names, ts - t0, q, qd, qdd, dict(traj.meta))
+
+
+def blend(parts: Sequence[BlendPart], split_period_s: float) -> tuple[list[JointTrajectory] | None, str]:
+    """One time-optimal motion through the parts' joined paths, at rest only at its two ends, cut
+    back into one trajectory per part (every inner one ends in motion; the cuts on multiples of
+    ``split_period_s``, the period the driver streams at, so no streamed step is shortened).
+
+    Timed along the joined path (TOPP-RA under the tightest part's limits, verified), then every part
+    is collision-checked in its own scene along the timed motion. Returns the pieces and "", or None
+    and why the blend was refused (the caller then stops at every waypoint).
+    """
+    first = parts[0].planner
+    c = first.config
+    rows = [parts[0].path[0][None]]
+    for p in parts:
+        rows.append((p.path if p.line else first._densify(p.path))[1:])
+    try:
+        whole = time_parameterize(
+            np.vstack(rows), _common_limits(parts), first.names, dt=c.knot_period_s, method="toppra"
+        )
+    except TrajectoryLimitError as exc:
+        return None, f"blend not timed: {exc}"
+    cuts = _pass_times(whole, [p.path[-1] for p in parts[:-1]])
+    period = split_period_s
+    bounds = [0.0, *(min(round(t / period) * period, whole.duration) for t in cuts), whole.duration]
+    if np.any(np.diff(bounds) <= 1e-6):
+        return None, "blend: a part is shorter than one streaming period"
+    pieces = [_window(whole, a, b) for a, b in itertools.pairwise(bounds)]
+    for k, (p, piece) in enumerate(zip(parts, pieces, strict=True)):
+        hit = p.planner.checker.first_collision_in_trajectory(
+            piece, p.planner.config.collision_resolution_rad
+        )
+        if hit is not None:
+            return None, f"blended motion touched {p.planner.checker.explain(hit[1])} in part {k}"
+    return pieces, ""

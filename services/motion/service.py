@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import time
 from collections.abc import Callable
 from typing import TypeVar
 
@@ -29,7 +30,7 @@ from services.kinematics.model import ArmModel, Kinematics, load_arm
 from services.kinematics.robot_models import ROBOTS
 from services.kinematics.trajectory import Array, JointTrajectory
 from services.kinematics.urdf import tool_geometry
-from services.motion.planner import MotionPlanner, Plan, PlannerConfig
+from services.motion.planner import BlendPart, MotionPlanner, Plan, PlannerConfig, blend
 
 log = logging.getLogger("pickplace.motion.service")
 
@@ -217,6 +218,7 @@ class MotionPlannerServicer(motion_pb2_grpc.MotionPlannerServicer):
             start = q = _joints(request.start, "start")
             names: tuple[str, ...] = ()
             pieces: list[JointTrajectory] = []
+            parts: list[BlendPart | None] = []  # per waypoint: what a blend through it needs
             paths, used, notes = [q[None]], [], []
             planning_s = timing_s = 0.0
             for k, w in enumerate(request.waypoints):
@@ -239,16 +241,21 @@ class MotionPlannerServicer(motion_pb2_grpc.MotionPlannerServicer):
                     plan = planner.plan_to_pose(q, pose_to_matrix(w.pose, f"{what}.pose"))
                 elif float(np.max(np.abs(goal - q))) < ALREADY_THERE_RAD:
                     pieces.append(JointTrajectory.hold(names, q))  # nothing to move
+                    parts.append(None)
                     continue
                 else:
                     plan = planner.plan_joints(q, goal)
                 pieces.append(plan.trajectory)
+                parts.append(BlendPart(planner, plan.path, w.motion == motion_pb2.MotionWaypoint.LINEAR))
                 paths.append(plan.path[1:])
                 used.append(plan.planner)
                 notes += plan.notes
                 planning_s += plan.planning_time_s
                 timing_s += plan.timing_time_s
                 q = plan.trajectory.positions[-1]
+            t_blend = time.perf_counter()
+            self._blend_runs(request, pieces, parts, notes)
+            timing_s += time.perf_counter() - t_blend
             whole = JointTrajectory.hold(names, start)
             for piece in pieces:
                 whole = whole.append(piece) if len(piece) > 1 else whole
@@ -257,6 +264,33 @@ class MotionPlannerServicer(motion_pb2_grpc.MotionPlannerServicer):
             return resp
 
         return await self._run("PlanWaypoints", work)
+
+    def _blend_runs(
+        self,
+        request: motion_pb2.PlanWaypointsRequest,
+        pieces: list[JointTrajectory],
+        parts: list[BlendPart | None],
+        notes: list[str],
+    ) -> None:
+        """Replace each run of moves joined by ``blend`` waypoints with one blended motion cut into
+        its parts (in place); a run that cannot be blended keeps its stops (noted)."""
+        period = self.settings.robot.servo_period_s
+        k = 0
+        while k < len(parts):
+            end = k
+            while end + 1 < len(parts) and request.waypoints[end].blend and parts[end] is not None:
+                if parts[end + 1] is None:
+                    break
+                end += 1
+            run = [p for p in parts[k : end + 1] if p is not None]
+            if len(run) > 1:
+                blended, why = blend(run, period)
+                if blended is None:
+                    notes.append(f"waypoints {k}..{end} stop at every waypoint: {why}")
+                    log.info("waypoints %d..%d not blended: %s", k, end, why)
+                else:
+                    pieces[k : end + 1] = blended
+            k = end + 1
 
     async def CheckTrajectory(
         self, request: motion_pb2.CheckTrajectoryRequest, context: grpc.aio.ServicerContext

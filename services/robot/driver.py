@@ -41,6 +41,9 @@ log = logging.getLogger("pickplace.robot.driver")
 T = TypeVar("T")
 
 START_TOLERANCE_RAD = np.deg2rad(1.0)  # a trajectory must start this close to the measured joints
+# targets queued beyond the lookahead at the end of a trajectory that continues: the controller keeps
+# moving while the next trajectory's request travels (a starved ServoJ queue stops the arm dead)
+CONTINUE_EXTRA_TARGETS = 8
 
 
 @dataclass(frozen=True)
@@ -71,6 +74,9 @@ class RobotDriver:
         self.gripper = DigitalOutputGripper(client, settings.gripper)
         self._abort = asyncio.Event()
         self._motion_lock = asyncio.Lock()
+        # the last target of a trajectory that continues (streamed, not yet executed): the next
+        # trajectory starts from it, not from the measured joints, which trail it while moving
+        self._continue_from: np.ndarray | None = None
 
     async def start(self) -> None:
         await self.client.connect()
@@ -129,12 +135,14 @@ class RobotDriver:
     async def stop(self) -> None:
         """Stop queued motion and abort any trajectory being streamed."""
         self._abort.set()
+        self._continue_from = None
         await self.client.stop()
 
     async def emergency_stop(self, release: bool = False) -> None:
         """Press (or release) the software e-stop. Sent before anything else is looked at."""
         if not release:
             self._abort.set()
+            self._continue_from = None
         await self.client.emergency_stop(press=not release)
 
     # ------------------------------------------------------------------ motion
@@ -175,7 +183,9 @@ class RobotDriver:
             return MoveResult(fb.q.copy(), time.perf_counter() - t0, attempts)
 
     def _servo_targets(self, traj: JointTrajectory, period: float) -> np.ndarray:
-        n = max(1, int(np.ceil(traj.duration / period)))
+        # the tolerance: a duration that is a multiple of the period (a blended segment's) gets no
+        # extra, repeated last target, which the controller would hold for a whole period
+        n = max(1, int(np.ceil(traj.duration / period - 1e-6)))
         ts = np.minimum(np.arange(1, n + 1) * period, traj.duration)
         q = traj.sample(ts, derivatives=0)[0]
         return np.atleast_2d(q)
@@ -185,8 +195,12 @@ class RobotDriver:
         traj: JointTrajectory,
         servo_period_s: float | None = None,
         stop_when: StopCondition | None = None,
+        continues: bool = False,
     ) -> MoveResult:
         """Stream the trajectory as ServoJ targets, one per period, in real time.
+
+        ``continues``: another trajectory follows without a stop (this one ends in motion): return as
+        soon as the last target is queued; the next call starts from that target, checked against it.
 
         Checked first, as a whole: joint names, the start against the measured
         joints, every streamed target against joint and workspace limits, and the
@@ -198,31 +212,39 @@ class RobotDriver:
             raise InvalidInputError(
                 f"trajectory joints {list(traj.joint_names)} do not match the robot's {list(self.spec.joint_names)}"
             )
+        if continues and stop_when is not None:
+            raise InvalidInputError("a guarded move ends at rest: it cannot continue into the next one")
         period = servo_period_s or self.settings.robot.servo_period_s
         if not 0.004 <= period <= 1.0:
             raise InvalidInputError(f"servo period must be within 4 ms..1 s, got {period}")
-        q_now = self.joint_positions()
+        fb = self.feedback
+        following = self._continue_from is not None and fb.robot_mode == RobotMode.RUNNING
+        q_now = self._continue_from if following and self._continue_from is not None else fb.q.copy()
+        self._continue_from = None
         start_err = float(np.max(np.abs(traj.positions[0] - q_now)))
         if start_err > START_TOLERANCE_RAD:
             raise InvalidInputError(
-                f"trajectory starts {np.rad2deg(start_err):.2f}° away from the measured joints "
+                f"trajectory starts {np.rad2deg(start_err):.2f}° away from the "
+                f"{'last queued target' if following else 'measured joints'} "
                 f"(tolerance {np.rad2deg(START_TOLERANCE_RAD):.1f}°); plan from the current state"
             )
         targets = self._servo_targets(traj, period)
         self.limits.check_all(targets, "trajectory")
         self.limits.check_velocities(targets, period, q_start=q_now)
-        fb = self.feedback
         if fb.estop:
             raise EmergencyStopError("emergency stop is active")
         if fb.in_error:
             raise ControllerError("controller is in alarm; clear it before executing a trajectory")
         async with self._motion_lock:
             self._abort.clear()
-            if stop_when is None:
-                return await self._stream(targets, period)
-            return await self._guarded(targets, period, stop_when)
+            if stop_when is not None:
+                return await self._guarded(targets, period, stop_when)
+            res = await self._stream(targets, period, wait_done=not continues)
+            if continues:
+                self._continue_from = targets[-1].copy()
+            return res
 
-    async def _stream(self, targets: np.ndarray, period: float) -> MoveResult:
+    async def _stream(self, targets: np.ndarray, period: float, wait_done: bool = True) -> MoveResult:
         """Send ServoJ targets, keeping at most ``servo_lookahead`` queued ahead of the one the
         controller is executing (flow control by CurrentCommandId from the feedback stream).
         Pacing therefore follows the controller's own clock — real time on hardware, any speed
@@ -230,6 +252,8 @@ class RobotDriver:
         loop = asyncio.get_running_loop()
         t0 = loop.time()
         window = self.settings.robot.servo_lookahead
+        if not wait_done:  # the next trajectory's request comes in while these run: more in hand
+            window += CONTINUE_EXTRA_TARGETS
         ids: list[int | None] = []
         for k, q in enumerate(targets):
             while True:
@@ -248,6 +272,8 @@ class RobotDriver:
                     break
                 await self.client.next_feedback()
             ids.append(await self.client.servo_j(q, period))
+        if not wait_done:  # the next trajectory continues the queue: the last target is the result
+            return MoveResult(targets[-1].copy(), loop.time() - t0, 1)
         fb = await self.client.wait_motion_done(
             ids[-1], max(self.settings.robot.motion_timeout_s, 2 * period)
         )

@@ -119,7 +119,9 @@ class RobotControllerServicer(robot_pb2_grpc.RobotControllerServicer):
             stop_when = force_drop_condition(
                 baseline, request.force_guard.force_drop_n, list(request.force_guard.direction)
             )
-        res = await self.driver.execute_trajectory(traj, request.servo_period_s or None, stop_when)
+        res = await self.driver.execute_trajectory(
+            traj, request.servo_period_s or None, stop_when, continues=request.continues
+        )
         return robot_pb2.MoveResponse(
             success=True,
             message=f"{len(traj)} points executed" + (" (stopped on force)" if res.stopped_early else ""),

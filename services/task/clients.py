@@ -244,7 +244,7 @@ class GrpcMotion:
             return []
         req = motion_pb2.PlanWaypointsRequest(start=start.tolist(), scene=self._scene(obstacles, None))
         for m in moves:
-            wp = motion_pb2.MotionWaypoint(motion=MOTION_TYPE[m.kind], label=m.label)
+            wp = motion_pb2.MotionWaypoint(motion=MOTION_TYPE[m.kind], label=m.label, blend=m.blend)
             if m.kind is MotionKind.JOINT:
                 wp.joints.extend(m.target.tolist())
             else:
@@ -277,8 +277,13 @@ class GrpcRobot:
             js = await self._stub.GetJointStates(robot_pb2.GetJointStatesRequest(), timeout=self._timeout)
         return np.array(js.position)
 
-    async def execute(self, traj: JointTrajectory, force_guard_n: float = 0.0) -> MoveOutcome:
-        req = robot_pb2.ExecuteTrajectoryRequest(trajectory=traj.to_proto())  # type: ignore[arg-type]
+    async def execute(
+        self, traj: JointTrajectory, force_guard_n: float = 0.0, continues: bool = False
+    ) -> MoveOutcome:
+        req = robot_pb2.ExecuteTrajectoryRequest(
+            trajectory=traj.to_proto(),  # type: ignore[arg-type]
+            continues=continues,
+        )
         if force_guard_n > 0:
             req.force_guard.CopyFrom(robot_pb2.ForceGuard(force_drop_n=force_guard_n))
         with rpc_errors():

@@ -334,6 +334,8 @@ class Orchestrator:
         """The trajectories to the waypoints ``indices`` (None elsewhere) from ``start``, planned in one
         request; a guarded approach is slowed to the grasp plan's touch-down speed."""
         moves = {i: m for i in indices if (m := _move(plan, i)) is not None}
+        last = max(moves, default=-1)
+        moves = {i: replace(m, blend=i != last and _blends(plan, i)) for i, m in moves.items()}
         planned = await self.motion.plan_moves(start, list(moves.values()), obstacles)
         if len(planned) != len(moves):
             raise PlanningError(f"the motion planner answered {len(planned)} of {len(moves)} moves")
@@ -362,15 +364,21 @@ class Orchestrator:
         """From waypoint ``resume.index`` on (its motion skipped when the arm had reached it)."""
         cfg = self.config
         plan = planned.plan
+        q_known: np.ndarray | None = None  # where the last move ended (no round trip for the joints)
+        in_motion = False  # the last trajectory ends in motion: this one continues it
         for i in range(resume.index, len(plan.waypoints)):
             w, traj = plan.waypoints[i], planned.trajs[i]
             self._progress = Progress(i, reached=i == resume.index and resume.reached)
             state = state_for(w.name)
             if state is not self.state:
                 self._enter(state, w.name)
+            if traj is not None and not self._progress.reached and not in_motion:
+                # the arm is at rest: jaws that open at a waypoint it will pass without stopping open now
+                await self._open_ahead(planned, i)
+            continues = traj is not None and _ends_in_motion(traj)
             if traj is not None and not self._progress.reached:
-                q_now = await self.robot.joints()
-                if np.max(np.abs(traj.positions[0] - q_now)) > RESUME_TOLERANCE_RAD:
+                q_now = q_known if q_known is not None else await self.robot.joints()
+                if not in_motion and np.max(np.abs(traj.positions[0] - q_now)) > RESUME_TOLERANCE_RAD:
                     # the arm is not where the plan assumed (a guarded stop, an alarm): replan from here
                     traj = (
                         await self._timed(
@@ -379,12 +387,14 @@ class Orchestrator:
                             f"replanning {w.name}",
                         )
                     )[i]
+                    continues = False
                 if traj is not None:
                     res = await self._timed(
-                        self.robot.execute(traj, w.guard_force_n),
+                        self.robot.execute(traj, w.guard_force_n, continues=continues),
                         cfg.deadlines.motion_s,
                         f"motion to {w.name}",
                     )
+                    q_known, in_motion = res.final_q, continues
                     log.debug(
                         "%s: planned %.2f s, executed %.2f s%s",
                         w.name,
@@ -395,7 +405,7 @@ class Orchestrator:
                     if w.guard_force_n > 0 and not res.stopped_early:
                         log.warning("%s: no touch-down detected within the overtravel", w.name)
             self._progress = Progress(i, reached=True)
-            if w.gripper is not None:
+            if w.gripper is not None and not (in_motion and w.gripper is GripperCommand.OPEN):
                 close = w.gripper is GripperCommand.CLOSE
                 g = await self._timed(
                     self.robot.gripper(close), cfg.deadlines.gripper_s, f"gripper {w.gripper}"
@@ -406,6 +416,20 @@ class Orchestrator:
                 holding = await self._timed(self.robot.holding(), cfg.deadlines.gripper_s, "grasp check")
                 if holding is False:
                     raise GraspFailureError("grasp verification after LIFT: the object is not in the gripper")
+
+    async def _open_ahead(self, planned: PlannedPick, i: int) -> None:
+        """Open the jaws for the waypoints from ``i`` on that the arm passes without stopping (the
+        motion to them ends in motion), before it sets off: an open there needs no stop."""
+        plan = planned.plan
+        for k in range(i, len(plan.waypoints)):
+            traj = planned.trajs[k]
+            if traj is None or not _ends_in_motion(traj):
+                return
+            if plan.waypoints[k].gripper is GripperCommand.OPEN:
+                w = plan.waypoints[k]
+                await self._timed(
+                    self.robot.gripper(False), self.config.deadlines.gripper_s, f"gripper {w.gripper}"
+                )
 
     async def _go_home(self) -> None:
         """INIT: a cycle starts at the safe home, out of the camera's view of the table (after an
@@ -487,6 +511,25 @@ def _move(plan: GraspPlan, i: int) -> Move | None:
         T[:3, 3] += w.guard_overtravel_m * w.guard_direction
     lifting_off = w.holding and i > 0 and not plan.waypoints[i - 1].holding
     return Move(MotionKind.LINEAR, T, held, slow=guarded, table_contact=lifting_off or guarded, label=w.name)
+
+
+def _blends(plan: GraspPlan, i: int) -> bool:
+    """Whether the arm may pass waypoint ``i`` without stopping: only physics asks for a stop (the
+    jaws closing, a guarded touch-down and the rest before it, a release) — an open of the jaws
+    while nothing is held is done before setting off."""
+    w = plan.waypoints[i]
+    if i + 1 >= len(plan.waypoints):
+        return False
+    nxt = plan.waypoints[i + 1]
+    if w.motion is MotionKind.HOLD or nxt.motion is MotionKind.HOLD:
+        return False
+    if w.guard_force_n > 0 or nxt.guard_force_n > 0:  # the guard measures its baseline at rest
+        return False
+    return w.gripper is None or (w.gripper is GripperCommand.OPEN and not w.holding)
+
+
+def _ends_in_motion(traj: JointTrajectory) -> bool:
+    return bool(np.any(np.abs(traj.velocities[-1]) > 1e-9))
 
 
 class _RecordingRobot:

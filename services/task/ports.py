@@ -115,6 +115,7 @@ class Move:
     slow: bool = False  # a guarded approach: at the touch-down speed scale
     table_contact: bool = False  # the held object may touch the table (lift-off, set-down)
     label: str = ""
+    blend: bool = False  # the arm does not stop at this move's target: it flows into the next move
 
     def __post_init__(self) -> None:
         shape = {MotionKind.JOINT: (self.target.ndim == 1), MotionKind.LINEAR: (self.target.shape == (4, 4))}
@@ -139,7 +140,11 @@ class MotionPort(Protocol):
 class RobotPort(Protocol):
     async def joints(self) -> np.ndarray: ...
 
-    async def execute(self, traj: JointTrajectory, force_guard_n: float = 0.0) -> MoveOutcome: ...
+    async def execute(
+        self, traj: JointTrajectory, force_guard_n: float = 0.0, continues: bool = False
+    ) -> MoveOutcome:
+        """``continues``: the trajectory ends in motion and the next one follows at once (answered
+        when it is queued; ``final_q`` is then its last target)."""
 
     async def gripper(self, close: bool) -> GripOutcome: ...
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import itertools
 import math
 
 import grpc
@@ -121,6 +123,47 @@ async def test_plan_cartesian_and_waypoints(stub, kin):
     assert resp.planner.split("+") == ["cartesian", "cartesian", "RRTConnect"]
     traj = JointTrajectory.from_proto(resp.trajectory)
     assert np.allclose(traj.positions[-1], Q_PLACE)
+
+
+async def test_blended_waypoints_flow_through_without_stopping(stub, kin):
+    """A joint move, a line up and a joint move, blended: one motion, faster than stopping at each
+    waypoint, cut into one segment per waypoint that ends in motion where the next one continues."""
+    top = kin.fk(Q_PICK)
+    up = top.copy()
+    up[2, 3] += 0.06
+    q_mid = Q_PICK + np.deg2rad([30, 0, 0, 0, 0, 0])
+
+    def request(blend: bool) -> motion_pb2.PlanWaypointsRequest:
+        return motion_pb2.PlanWaypointsRequest(
+            start=q_mid.tolist(),
+            waypoints=[
+                motion_pb2.MotionWaypoint(
+                    motion=motion_pb2.MotionWaypoint.JOINT, joints=Q_PICK.tolist(), blend=blend
+                ),
+                motion_pb2.MotionWaypoint(
+                    motion=motion_pb2.MotionWaypoint.LINEAR, pose=matrix_to_pose(up), blend=blend
+                ),
+                motion_pb2.MotionWaypoint(motion=motion_pb2.MotionWaypoint.JOINT, joints=Q_PLACE.tolist()),
+            ],
+        )
+
+    stopping, blended = await stub.PlanWaypoints(request(False)), await stub.PlanWaypoints(request(True))
+    segs = [JointTrajectory.from_proto(s) for s in blended.segments]
+    assert len(segs) == 3 and not [n for n in blended.notes if "stop at every waypoint" in n]
+    assert blended.duration_s < stopping.duration_s
+    for a, b in itertools.pairwise(segs):
+        assert np.max(np.abs(a.velocities[-1])) > 1e-3  # in motion at the cut
+        assert np.allclose(a.positions[-1], b.positions[0]) and np.allclose(a.velocities[-1], b.velocities[0])
+    assert np.max(np.abs(segs[-1].velocities[-1])) == 0.0 and np.allclose(segs[-1].positions[-1], Q_PLACE)
+    # the cuts fall on the driver's streaming period, the whole within the limits
+    period = 0.03
+    for seg in segs[:-1]:
+        assert seg.duration / period == pytest.approx(round(seg.duration / period), abs=1e-6)
+    whole = JointTrajectory.from_proto(blended.trajectory)
+    verify_trajectory(whole, dataclasses.replace(JointLimits.from_spec(kin.spec), max_jerk=None), start=q_mid)
+    # the line part still passes within a few mm of the waypoint it blends through
+    closest = min(np.linalg.norm(kin.fk(q)[:3, 3] - up[:3, 3]) for q in whole.positions)
+    assert closest < 0.01
 
 
 async def test_attached_object_and_allowed_pairs_reach_the_planner(stub):

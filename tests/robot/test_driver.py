@@ -13,7 +13,7 @@ from services.common.errors import (
     TrajectoryExecutionError,
 )
 from services.kinematics.interpolation import min_jerk_keypose_trajectory, quintic_move
-from services.kinematics.trajectory import JointLimits
+from services.kinematics.trajectory import JointLimits, JointTrajectory
 from services.robot.service import build_driver
 from tests.conftest import HOME
 
@@ -78,6 +78,30 @@ async def test_execute_trajectory_tracks_and_ends_at_goal(driver):
     res = await driver.execute_trajectory(traj)
     assert np.allclose(res.final_q, goal, atol=1e-6)
     assert res.duration_s >= traj.duration * 0.9
+
+
+def _part(traj: JointTrajectory, t0: float, t1: float) -> JointTrajectory:
+    ts = np.union1d([t0, t1], traj.times[(traj.times > t0) & (traj.times < t1)])
+    q, qd, qdd = traj.sample(ts)
+    return JointTrajectory(traj.joint_names, ts - t0, q, qd, qdd)
+
+
+async def test_a_continuing_trajectory_hands_over_in_motion(driver):
+    """The first half ends in motion: answered once queued (its last target the result), and the
+    second half, starting there, is accepted although the measured joints trail it."""
+    goal = np.deg2rad([30, 20, 80, -10, -90, 0])
+    traj = quintic_move(
+        driver.joint_positions(), goal, joint_names=driver.spec.joint_names, limits=limits(driver.spec)
+    )
+    half = round(traj.duration / 2 / 0.03) * 0.03
+    first, second = _part(traj, 0.0, half), _part(traj, half, traj.duration)
+    assert np.max(np.abs(first.velocities[-1])) > 0.1
+    res = await driver.execute_trajectory(first, 0.03, continues=True)
+    assert np.allclose(res.final_q, first.positions[-1])
+    done = await driver.execute_trajectory(second, 0.03)
+    assert np.allclose(done.final_q, goal, atol=1e-6)
+    with pytest.raises(InvalidInputError, match="cannot continue"):
+        await driver.execute_trajectory(second, 0.03, stop_when=lambda fb: False, continues=True)
 
 
 async def test_trajectory_start_mismatch_and_overspeed_rejected(driver, sim_server):

@@ -171,9 +171,10 @@ class MotionRequest:
 class FakeMotion:
     """Straight joint lines on the toy arm; ``failures`` maps a request number to the error it raises."""
 
-    def __init__(self, failures: dict[int, Exception] | None = None):
+    def __init__(self, failures: dict[int, Exception] | None = None, blending: bool = False):
         self.failures = dict(failures or {})
         self.requests: list[MotionRequest] = []
+        self.blending = blending  # a move marked ``blend`` ends in motion (as the motion service cuts it)
 
     async def plan_moves(
         self, start: np.ndarray, moves: Sequence[Move], obstacles: tuple[SeenBox, ...]
@@ -189,7 +190,10 @@ class FakeMotion:
             if m.kind is MotionKind.JOINT and np.max(np.abs(goal - q)) < 1e-9:
                 out.append(None)  # already there
                 continue
-            out.append(line(q, goal, m.label))
+            traj = line(q, goal, m.label)
+            if self.blending and m.blend:
+                traj.velocities[-1] = (goal - q) / traj.duration
+            out.append(traj)
             q = goal
         return out
 
@@ -221,13 +225,16 @@ class FakeRobot:
     commands: list[tuple[object, ...]] = field(default_factory=list)
     clock_s: float = 0.0  # the controller's clock: advances by what the arm executes
     moves: int = 0
+    continued: list[str] = field(default_factory=list)  # labels of the moves sent as continuing
     safety_stopped: bool = False
     _holding_calls: int = 0
 
     async def joints(self) -> np.ndarray:
         return self.q.copy()
 
-    async def execute(self, traj: JointTrajectory, force_guard_n: float = 0.0) -> MoveOutcome:
+    async def execute(
+        self, traj: JointTrajectory, force_guard_n: float = 0.0, continues: bool = False
+    ) -> MoveOutcome:
         from services.common.errors import EmergencyStopError
 
         if self.safety_stopped:
@@ -240,6 +247,8 @@ class FakeRobot:
         self.q = a + share * (b - a)
         self.clock_s += share * traj.duration
         self.commands.append(("move", traj.meta.get("label", ""), force_guard_n > 0))
+        if continues:
+            self.continued.append(str(traj.meta.get("label", "")))
         if fault is not None:
             self.safety_stopped = fault.safety
             raise fault.error

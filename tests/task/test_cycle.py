@@ -75,6 +75,26 @@ async def test_the_whole_plan_is_one_motion_request_with_each_moves_scene() -> N
     assert cell.motion.requests[1].start != tuple(by["PLACE"].target[:3, 3]) + (0.0, 0.0, 0.0)
 
 
+async def test_the_arm_stops_only_where_physics_asks() -> None:
+    """Blends everywhere but at the jaws closing, the rest before and the guarded touch-down itself,
+    and the release; a blended move continues into the next and an open on the way is done first."""
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))))
+    cell.motion.blending = True
+    outcome = await cell.run()
+    assert outcome.success
+    by = {m.label: m for m in cell.motion.requests[0].moves}
+    assert {n for n, m in by.items() if m.blend} == {"SAFE_HOME", "PRE_GRASP", "LIFT"}
+    assert cell.robot.continued == ["PRE_GRASP", "LIFT"]
+    assert cell.robot.commands[:5] == [
+        ("recover",),
+        ("gripper", OPEN),  # before setting off: PRE_GRASP is passed in motion
+        ("move", "PRE_GRASP", False),
+        ("move", "GRASP", False),
+        ("gripper", CLOSE),
+    ]
+    assert cell.robot.commands.count(("gripper", OPEN)) == 2  # and the release
+
+
 async def test_a_guarded_approach_is_paced_at_the_touch_down_speed() -> None:
     cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))))
     outcome = await cell.run()

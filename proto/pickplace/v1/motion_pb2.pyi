@@ -153,7 +153,7 @@ class PlanCartesianRequest(_message.Message):
     def __init__(self, start: _Optional[_Iterable[float]] = ..., poses: _Optional[_Iterable[_Union[_common_pb2.Pose, _Mapping]]] = ..., scene: _Optional[_Union[PlanningScene, _Mapping]] = ..., options: _Optional[_Union[MotionOptions, _Mapping]] = ...) -> None: ...
 
 class MotionWaypoint(_message.Message):
-    __slots__ = ("motion", "pose", "joints", "label", "scene", "options")
+    __slots__ = ("motion", "pose", "joints", "label", "scene", "options", "blend")
     class MotionType(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
         __slots__ = ()
         MOTION_TYPE_UNSPECIFIED: _ClassVar[MotionWaypoint.MotionType]
@@ -168,13 +168,15 @@ class MotionWaypoint(_message.Message):
     LABEL_FIELD_NUMBER: _ClassVar[int]
     SCENE_FIELD_NUMBER: _ClassVar[int]
     OPTIONS_FIELD_NUMBER: _ClassVar[int]
+    BLEND_FIELD_NUMBER: _ClassVar[int]
     motion: MotionWaypoint.MotionType
     pose: _common_pb2.Pose
     joints: _containers.RepeatedScalarFieldContainer[float]
     label: str
     scene: PlanningScene
     options: MotionOptions
-    def __init__(self, motion: _Optional[_Union[MotionWaypoint.MotionType, str]] = ..., pose: _Optional[_Union[_common_pb2.Pose, _Mapping]] = ..., joints: _Optional[_Iterable[float]] = ..., label: _Optional[str] = ..., scene: _Optional[_Union[PlanningScene, _Mapping]] = ..., options: _Optional[_Union[MotionOptions, _Mapping]] = ...) -> None: ...
+    blend: bool
+    def __init__(self, motion: _Optional[_Union[MotionWaypoint.MotionType, str]] = ..., pose: _Optional[_Union[_common_pb2.Pose, _Mapping]] = ..., joints: _Optional[_Iterable[float]] = ..., label: _Optional[str] = ..., scene: _Optional[_Union[PlanningScene, _Mapping]] = ..., options: _Optional[_Union[MotionOptions, _Mapping]] = ..., blend: _Optional[bool] = ...) -> None: ...
 
 class PlanWaypointsRequest(_message.Message):
     __slots__ = ("start", "waypoints", "scene", "options")

@@ -25,7 +25,7 @@ _sym_db = _symbol_database.Default()
 from pickplace.v1 import common_pb2 as pickplace_dot_v1_dot_common__pb2
 
 
-DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x18pickplace/v1/robot.proto\x12\x0cpickplace.v1\x1a\x19pickplace/v1/common.proto\"\x17\n\x15GetJointStatesRequest\"\x12\n\x10GetStatusRequest\"\xe0\x01\n\x0bRobotStatus\x12\x12\n\nrobot_mode\x18\x01 \x01(\x05\x12\x17\n\x0frobot_mode_name\x18\x02 \x01(\t\x12\x0f\n\x07\x65nabled\x18\x03 \x01(\x08\x12\x11\n\tconnected\x18\x04 \x01(\x08\x12\x0e\n\x06\x61larms\x18\x05 \x03(\x05\x12-\n\x0bjoint_state\x18\x06 \x01(\x0b\x32\x18.pickplace.v1.JointState\x12\x16\n\x0egripper_closed\x18\x07 \x01(\x08\x12\x14\n\x0c\x65stop_active\x18\x08 \x01(\x08\x12\x13\n\x0brobot_model\x18\t \x01(\t\"{\n\x11MoveJointsRequest\x12\x11\n\tpositions\x18\x01 \x03(\x01\x12\x14\n\x0cmax_velocity\x18\x02 \x01(\x01\x12\x18\n\x10max_acceleration\x18\x03 \x01(\x01\x12\x13\n\x0bspeed_ratio\x18\x04 \x01(\x01\x12\x0e\n\x06linear\x18\x05 \x01(\x08\"x\n\x0cMoveResponse\x12\x0f\n\x07success\x18\x01 \x01(\x08\x12\x0f\n\x07message\x18\x02 \x01(\t\x12\x16\n\x0e\x65xecution_time\x18\x03 \x01(\x01\x12\x17\n\x0f\x66inal_positions\x18\x04 \x03(\x01\x12\x15\n\rstopped_early\x18\x05 \x01(\x08\"\x94\x01\n\x18\x45xecuteTrajectoryRequest\x12\x31\n\ntrajectory\x18\x01 \x01(\x0b\x32\x1d.pickplace.v1.JointTrajectory\x12\x16\n\x0eservo_period_s\x18\x02 \x01(\x01\x12-\n\x0b\x66orce_guard\x18\x03 \x01(\x0b\x32\x18.pickplace.v1.ForceGuard\"5\n\nForceGuard\x12\x14\n\x0c\x66orce_drop_n\x18\x01 \x01(\x01\x12\x11\n\tdirection\x18\x02 \x03(\x01\"/\n\x18StreamJointStatesRequest\x12\x13\n\x0bmax_rate_hz\x18\x01 \x01(\x01\"\x84\x01\n\x13\x45xecuteGraspRequest\x12&\n\ngrasp_pose\x18\x01 \x01(\x0b\x32\x12.pickplace.v1.Pose\x12\x19\n\x11\x61pproach_distance\x18\x02 \x01(\x01\x12\x15\n\rlift_distance\x18\x03 \x01(\x01\x12\x13\n\x0bspeed_scale\x18\x04 \x01(\x01\"\"\n\x11SetGripperRequest\x12\r\n\x05\x63lose\x18\x01 \x01(\x08\"\\\n\x0fGripperResponse\x12\x0f\n\x07success\x18\x01 \x01(\x08\x12\x0e\n\x06\x63losed\x18\x02 \x01(\x08\x12\x17\n\x0fobject_detected\x18\x03 \x01(\x08\x12\x0f\n\x07message\x18\x04 \x01(\t\"\r\n\x0bStopRequest\"\'\n\x14\x45mergencyStopRequest\x12\x0f\n\x07release\x18\x01 \x01(\x08\"\x13\n\x11\x43learErrorRequest\"\x0f\n\rEnableRequest\"\x10\n\x0e\x44isableRequest2\xb9\x07\n\x0fRobotController\x12O\n\x0eGetJointStates\x12#.pickplace.v1.GetJointStatesRequest\x1a\x18.pickplace.v1.JointState\x12\x46\n\tGetStatus\x12\x1e.pickplace.v1.GetStatusRequest\x1a\x19.pickplace.v1.RobotStatus\x12I\n\nMoveJoints\x12\x1f.pickplace.v1.MoveJointsRequest\x1a\x1a.pickplace.v1.MoveResponse\x12W\n\x11\x45xecuteTrajectory\x12&.pickplace.v1.ExecuteTrajectoryRequest\x1a\x1a.pickplace.v1.MoveResponse\x12W\n\x11StreamJointStates\x12&.pickplace.v1.StreamJointStatesRequest\x1a\x18.pickplace.v1.JointState0\x01\x12L\n\nSetGripper\x12\x1f.pickplace.v1.SetGripperRequest\x1a\x1d.pickplace.v1.GripperResponse\x12P\n\x0c\x45xecuteGrasp\x12!.pickplace.v1.ExecuteGraspRequest\x1a\x1d.pickplace.v1.GripperResponse\x12@\n\x04Stop\x12\x19.pickplace.v1.StopRequest\x1a\x1d.pickplace.v1.CommandResponse\x12R\n\rEmergencyStop\x12\".pickplace.v1.EmergencyStopRequest\x1a\x1d.pickplace.v1.CommandResponse\x12L\n\nClearError\x12\x1f.pickplace.v1.ClearErrorRequest\x1a\x1d.pickplace.v1.CommandResponse\x12\x44\n\x06\x45nable\x12\x1b.pickplace.v1.EnableRequest\x1a\x1d.pickplace.v1.CommandResponse\x12\x46\n\x07\x44isable\x12\x1c.pickplace.v1.DisableRequest\x1a\x1d.pickplace.v1.CommandResponseb\x06proto3')
+DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x18pickplace/v1/robot.proto\x12\x0cpickplace.v1\x1a\x19pickplace/v1/common.proto\"\x17\n\x15GetJointStatesRequest\"\x12\n\x10GetStatusRequest\"\xe0\x01\n\x0bRobotStatus\x12\x12\n\nrobot_mode\x18\x01 \x01(\x05\x12\x17\n\x0frobot_mode_name\x18\x02 \x01(\t\x12\x0f\n\x07\x65nabled\x18\x03 \x01(\x08\x12\x11\n\tconnected\x18\x04 \x01(\x08\x12\x0e\n\x06\x61larms\x18\x05 \x03(\x05\x12-\n\x0bjoint_state\x18\x06 \x01(\x0b\x32\x18.pickplace.v1.JointState\x12\x16\n\x0egripper_closed\x18\x07 \x01(\x08\x12\x14\n\x0c\x65stop_active\x18\x08 \x01(\x08\x12\x13\n\x0brobot_model\x18\t \x01(\t\"{\n\x11MoveJointsRequest\x12\x11\n\tpositions\x18\x01 \x03(\x01\x12\x14\n\x0cmax_velocity\x18\x02 \x01(\x01\x12\x18\n\x10max_acceleration\x18\x03 \x01(\x01\x12\x13\n\x0bspeed_ratio\x18\x04 \x01(\x01\x12\x0e\n\x06linear\x18\x05 \x01(\x08\"x\n\x0cMoveResponse\x12\x0f\n\x07success\x18\x01 \x01(\x08\x12\x0f\n\x07message\x18\x02 \x01(\t\x12\x16\n\x0e\x65xecution_time\x18\x03 \x01(\x01\x12\x17\n\x0f\x66inal_positions\x18\x04 \x03(\x01\x12\x15\n\rstopped_early\x18\x05 \x01(\x08\"\xa7\x01\n\x18\x45xecuteTrajectoryRequest\x12\x31\n\ntrajectory\x18\x01 \x01(\x0b\x32\x1d.pickplace.v1.JointTrajectory\x12\x16\n\x0eservo_period_s\x18\x02 \x01(\x01\x12-\n\x0b\x66orce_guard\x18\x03 \x01(\x0b\x32\x18.pickplace.v1.ForceGuard\x12\x11\n\tcontinues\x18\x04 \x01(\x08\"5\n\nForceGuard\x12\x14\n\x0c\x66orce_drop_n\x18\x01 \x01(\x01\x12\x11\n\tdirection\x18\x02 \x03(\x01\"/\n\x18StreamJointStatesRequest\x12\x13\n\x0bmax_rate_hz\x18\x01 \x01(\x01\"\x84\x01\n\x13\x45xecuteGraspRequest\x12&\n\ngrasp_pose\x18\x01 \x01(\x0b\x32\x12.pickplace.v1.Pose\x12\x19\n\x11\x61pproach_distance\x18\x02 \x01(\x01\x12\x15\n\rlift_distance\x18\x03 \x01(\x01\x12\x13\n\x0bspeed_scale\x18\x04 \x01(\x01\"\"\n\x11SetGripperRequest\x12\r\n\x05\x63lose\x18\x01 \x01(\x08\"\\\n\x0fGripperResponse\x12\x0f\n\x07success\x18\x01 \x01(\x08\x12\x0e\n\x06\x63losed\x18\x02 \x01(\x08\x12\x17\n\x0fobject_detected\x18\x03 \x01(\x08\x12\x0f\n\x07message\x18\x04 \x01(\t\"\r\n\x0bStopRequest\"\'\n\x14\x45mergencyStopRequest\x12\x0f\n\x07release\x18\x01 \x01(\x08\"\x13\n\x11\x43learErrorRequest\"\x0f\n\rEnableRequest\"\x10\n\x0e\x44isableRequest2\xb9\x07\n\x0fRobotController\x12O\n\x0eGetJointStates\x12#.pickplace.v1.GetJointStatesRequest\x1a\x18.pickplace.v1.JointState\x12\x46\n\tGetStatus\x12\x1e.pickplace.v1.GetStatusRequest\x1a\x19.pickplace.v1.RobotStatus\x12I\n\nMoveJoints\x12\x1f.pickplace.v1.MoveJointsRequest\x1a\x1a.pickplace.v1.MoveResponse\x12W\n\x11\x45xecuteTrajectory\x12&.pickplace.v1.ExecuteTrajectoryRequest\x1a\x1a.pickplace.v1.MoveResponse\x12W\n\x11StreamJointStates\x12&.pickplace.v1.StreamJointStatesRequest\x1a\x18.pickplace.v1.JointState0\x01\x12L\n\nSetGripper\x12\x1f.pickplace.v1.SetGripperRequest\x1a\x1d.pickplace.v1.GripperResponse\x12P\n\x0c\x45xecuteGrasp\x12!.pickplace.v1.ExecuteGraspRequest\x1a\x1d.pickplace.v1.GripperResponse\x12@\n\x04Stop\x12\x19.pickplace.v1.StopRequest\x1a\x1d.pickplace.v1.CommandResponse\x12R\n\rEmergencyStop\x12\".pickplace.v1.EmergencyStopRequest\x1a\x1d.pickplace.v1.CommandResponse\x12L\n\nClearError\x12\x1f.pickplace.v1.ClearErrorRequest\x1a\x1d.pickplace.v1.CommandResponse\x12\x44\n\x06\x45nable\x12\x1b.pickplace.v1.EnableRequest\x1a\x1d.pickplace.v1.CommandResponse\x12\x46\n\x07\x44isable\x12\x1c.pickplace.v1.DisableRequest\x1a\x1d.pickplace.v1.CommandResponseb\x06proto3')
 
 _globals = globals()
 _builder.BuildMessageAndEnumDescriptors(DESCRIPTOR, _globals)
@@ -43,27 +43,27 @@ if not _descriptor._USE_C_DESCRIPTORS:
   _globals['_MOVERESPONSE']._serialized_start=466
   _globals['_MOVERESPONSE']._serialized_end=586
   _globals['_EXECUTETRAJECTORYREQUEST']._serialized_start=589
-  _globals['_EXECUTETRAJECTORYREQUEST']._serialized_end=737
-  _globals['_FORCEGUARD']._serialized_start=739
-  _globals['_FORCEGUARD']._serialized_end=792
-  _globals['_STREAMJOINTSTATESREQUEST']._serialized_start=794
-  _globals['_STREAMJOINTSTATESREQUEST']._serialized_end=841
-  _globals['_EXECUTEGRASPREQUEST']._serialized_start=844
-  _globals['_EXECUTEGRASPREQUEST']._serialized_end=976
-  _globals['_SETGRIPPERREQUEST']._serialized_start=978
-  _globals['_SETGRIPPERREQUEST']._serialized_end=1012
-  _globals['_GRIPPERRESPONSE']._serialized_start=1014
-  _globals['_GRIPPERRESPONSE']._serialized_end=1106
-  _globals['_STOPREQUEST']._serialized_start=1108
-  _globals['_STOPREQUEST']._serialized_end=1121
-  _globals['_EMERGENCYSTOPREQUEST']._serialized_start=1123
-  _globals['_EMERGENCYSTOPREQUEST']._serialized_end=1162
-  _globals['_CLEARERRORREQUEST']._serialized_start=1164
-  _globals['_CLEARERRORREQUEST']._serialized_end=1183
-  _globals['_ENABLEREQUEST']._serialized_start=1185
-  _globals['_ENABLEREQUEST']._serialized_end=1200
-  _globals['_DISABLEREQUEST']._serialized_start=1202
-  _globals['_DISABLEREQUEST']._serialized_end=1218
-  _globals['_ROBOTCONTROLLER']._serialized_start=1221
-  _globals['_ROBOTCONTROLLER']._serialized_end=2174
+  _globals['_EXECUTETRAJECTORYREQUEST']._serialized_end=756
+  _globals['_FORCEGUARD']._serialized_start=758
+  _globals['_FORCEGUARD']._serialized_end=811
+  _globals['_STREAMJOINTSTATESREQUEST']._serialized_start=813
+  _globals['_STREAMJOINTSTATESREQUEST']._serialized_end=860
+  _globals['_EXECUTEGRASPREQUEST']._serialized_start=863
+  _globals['_EXECUTEGRASPREQUEST']._serialized_end=995
+  _globals['_SETGRIPPERREQUEST']._serialized_start=997
+  _globals['_SETGRIPPERREQUEST']._serialized_end=1031
+  _globals['_GRIPPERRESPONSE']._serialized_start=1033
+  _globals['_GRIPPERRESPONSE']._serialized_end=1125
+  _globals['_STOPREQUEST']._serialized_start=1127
+  _globals['_STOPREQUEST']._serialized_end=1140
+  _globals['_EMERGENCYSTOPREQUEST']._serialized_start=1142
+  _globals['_EMERGENCYSTOPREQUEST']._serialized_end=1181
+  _globals['_CLEARERRORREQUEST']._serialized_start=1183
+  _globals['_CLEARERRORREQUEST']._serialized_end=1202
+  _globals['_ENABLEREQUEST']._serialized_start=1204
+  _globals['_ENABLEREQUEST']._serialized_end=1219
+  _globals['_DISABLEREQUEST']._serialized_start=1221
+  _globals['_DISABLEREQUEST']._serialized_end=1237
+  _globals['_ROBOTCONTROLLER']._serialized_start=1240
+  _globals['_ROBOTCONTROLLER']._serialized_end=2193
 # @@protoc_insertion_point(module_scope)

@@ -66,14 +66,16 @@ class MoveResponse(_message.Message):
     def __init__(self, success: _Optional[bool] = ..., message: _Optional[str] = ..., execution_time: _Optional[float] = ..., final_positions: _Optional[_Iterable[float]] = ..., stopped_early: _Optional[bool] = ...) -> None: ...
 
 class ExecuteTrajectoryRequest(_message.Message):
-    __slots__ = ("trajectory", "servo_period_s", "force_guard")
+    __slots__ = ("trajectory", "servo_period_s", "force_guard", "continues")
     TRAJECTORY_FIELD_NUMBER: _ClassVar[int]
     SERVO_PERIOD_S_FIELD_NUMBER: _ClassVar[int]
     FORCE_GUARD_FIELD_NUMBER: _ClassVar[int]
+    CONTINUES_FIELD_NUMBER: _ClassVar[int]
     trajectory: _common_pb2.JointTrajectory
     servo_period_s: float
     force_guard: ForceGuard
-    def __init__(self, trajectory: _Optional[_Union[_common_pb2.JointTrajectory, _Mapping]] = ..., servo_period_s: _Optional[float] = ..., force_guard: _Optional[_Union[ForceGuard, _Mapping]] = ...) -> None: ...
+    continues: bool
+    def __init__(self, trajectory: _Optional[_Union[_common_pb2.JointTrajectory, _Mapping]] = ..., servo_period_s: _Optional[float] = ..., force_guard: _Optional[_Union[ForceGuard, _Mapping]] = ..., continues: _Optional[bool] = ...) -> None: ...
 
 class ForceGuard(_message.Message):
     __slots__ = ("force_drop_n", "direction")
