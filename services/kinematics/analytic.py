@@ -64,9 +64,10 @@ SINGULAR_RAD = 1e-6
 CLIP_SLACK = 1e-6
 # Beyond ±1 by no more than this is rounding: the clipped solution is exact without a check.
 _ROUNDING = 1e-12
-# Two solutions at a singularity closer than this in every joint are one solution: there the pose
-# fixes the joints no better (at a folded elbow θ3 to √ε ≈ 1e-7 rad, and θ2, θ4 to ~12 times that).
-DUPLICATE_RAD = 1e-5
+# Two solutions flagged at the same singularity and closer than this in every joint are one solution
+# (both exact): the branches that meet there, apart by rounding only (θ3 = ±acos(−1 + 1e-16) ≈ ±1e-8).
+DUPLICATE_RAD = 1e-6
+_POLISH_STEPS = 12  # Gauss–Newton steps for a clipped solution (quadratic: 3-4 suffice off a singularity)
 _PI = math.pi
 _TWO_PI = 2.0 * math.pi
 
@@ -604,37 +605,48 @@ def _closed_form(
     return out, any_clipped, any_singular
 
 
+def _residual(ch: Chain, q: Array, T: Array) -> tuple[Array, float, float, Array]:
+    """(error twist [dp, dw] in the base frame, position error m, rotation error rad, Jacobian 6×6)."""
+    F = ch.origins[0]
+    axes, points = [], []
+    for i in range(6):
+        F = F @ _rz(q[i] + ch.offsets[i])
+        axes.append(F[:3, 2])
+        points.append(F[:3, 3])
+        F = F @ ch.origins[i + 1]
+    dp = T[:3, 3] - F[:3, 3]
+    dR = T[:3, :3] @ F[:3, :3].T
+    w = 0.5 * np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0], dR[1, 0] - dR[0, 1]])
+    sw = float(np.linalg.norm(w))
+    angle = math.atan2(sw, (float(np.trace(dR)) - 1.0) / 2.0)
+    dw = w * (angle / sw) if sw > 0.0 else w  # the rotation vector of dR
+    z = np.array(axes)
+    J = np.vstack([np.cross(z, F[:3, 3] - np.array(points)).T, z.T])
+    return np.concatenate([dp, dw]), float(np.linalg.norm(dp)), angle, J
+
+
 def _polish(ch: Chain, q0: tuple[float, ...], T: Array) -> tuple[tuple[float, ...], float, float]:
     """Gauss–Newton on the chain from a clipped closed-form solution: (joints, position error m,
     rotation error rad). Minimum-norm steps (least squares), so a Jacobian that is singular there
-    (the pose sits on a boundary) does no harm; for a reachable pose this ends exact to rounding."""
+    (the pose sits on a boundary) does no harm, each step shortened until it lowers the error, so
+    a pose just beyond reach (no exact solution) keeps the nearest configuration found; for a
+    reachable pose this ends exact to rounding."""
     q = np.asarray(q0, dtype=float)
-    theta0 = np.asarray(ch.offsets)
-    pos = rot = math.inf
+    e, pos, rot, J = _residual(ch, q, T)
     for _ in range(_POLISH_STEPS):
-        F = ch.origins[0]
-        axes, points = [], []
-        for i in range(6):
-            F = F @ _rz(q[i] + theta0[i])
-            axes.append(F[:3, 2])
-            points.append(F[:3, 3])
-            F = F @ ch.origins[i + 1]
-        dp = T[:3, 3] - F[:3, 3]
-        dR = T[:3, :3] @ F[:3, :3].T
-        w = 0.5 * np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0], dR[1, 0] - dR[0, 1]])
-        sw = float(np.linalg.norm(w))
-        angle = math.atan2(sw, (float(np.trace(dR)) - 1.0) / 2.0)
-        dw = w * (angle / sw) if sw > 1e-300 else w  # the rotation vector of dR
-        pos, rot = float(np.linalg.norm(dp)), angle
         if pos < 1e-14 and rot < 1e-14:
             break
-        z = np.array(axes)
-        J = np.vstack([np.cross(z, F[:3, 3] - np.array(points)).T, z.T])
-        q = q + np.linalg.lstsq(J, np.concatenate([dp, dw]), rcond=1e-12)[0]
+        step = np.linalg.lstsq(J, e, rcond=1e-12)[0]
+        for _ in range(6):
+            trial = _residual(ch, q + step, T)
+            if trial[1] + trial[2] < pos + rot:
+                break
+            step *= 0.25
+        else:
+            break  # no step lowers the error: as near as it gets
+        q = q + step
+        e, pos, rot, J = trial
     return tuple(q.tolist()), pos, rot
-
-
-_POLISH_STEPS = 12  # Gauss–Newton steps for a clipped solution (quadratic: 3-4 are enough off a singularity)
 
 
 def _refined(
