@@ -1,9 +1,8 @@
-"""Motion figures: analytic and numerical IK, planning around an obstacle, trajectory generation.
+"""Motion figures: planning around an obstacle, trajectory generation (the IK figures are in
+``bench_kinematics``).
 
-Targets (issue 3): analytic all-solutions ≤ 50 µs single and ≤ 10 µs batched per pose;
-numerical ≥ 99.9 % success with median ≤ 150 µs from a cold seed; planning around an
-obstacle median ≤ 10 ms. Times are wall-clock on whatever else the machine is doing;
-CPU time (process) is printed beside them for the IK figures.
+Target (issue 3): planning around an obstacle median ≤ 10 ms. Times are wall-clock on whatever
+else the machine is doing.
 """
 
 from __future__ import annotations
@@ -15,87 +14,15 @@ import numpy as np
 
 from services.common.errors import RobotError
 from services.common.frames import make_transform
-from services.kinematics import analytic
 from services.kinematics.collision import Box, Scene
 from services.kinematics.interpolation import min_jerk_keypose_trajectory
-from services.kinematics.model import Kinematics, load_arm
+from services.kinematics.model import load_arm
 from services.kinematics.robot_models import get_robot
 from services.kinematics.trajectory import JointLimits
 from services.motion.planner import MotionPlanner, PlannerConfig
 from services.motion.timing import time_parameterize
 
-ROBOTS = ("nova5", "ur5e", "ur3")
 DOWN = np.diag([1.0, -1.0, -1.0])
-
-
-def _random_q(spec, rng, n):  # type: ignore[no-untyped-def]
-    lo = np.maximum(spec.lower, -2 * np.pi)
-    hi = np.minimum(spec.upper, 2 * np.pi)
-    return rng.uniform(lo, hi, (n, spec.dof))
-
-
-def _stats_us(xs: list[float]) -> str:
-    a = np.asarray(xs) * 1e6
-    return f"median {np.median(a):.1f} µs, mean {a.mean():.1f} µs, p95 {np.percentile(a, 95):.1f} µs"
-
-
-def bench_analytic(n: int = 10_000) -> None:
-    print(f"analytic IK, all solutions verified by FK, {n} random reachable poses per robot")
-    for name in ROBOTS:
-        spec = get_robot(name)
-        rng = np.random.default_rng(0)
-        qs = _random_q(spec, rng, n)
-        Ts = analytic.fk(spec, qs)
-        analytic.ik_solutions(spec, Ts[0])  # warm up
-        wall, cpu, found, total = [], [], 0, 0
-        for k in range(n):
-            w0, c0 = time.perf_counter(), time.process_time()
-            sols = analytic.ik_solutions(spec, Ts[k])
-            wall.append(time.perf_counter() - w0)
-            cpu.append(time.process_time() - c0)
-            total += len(sols)
-            if sols:
-                d = np.abs((np.asarray(sols) - qs[k] + np.pi) % (2 * np.pi) - np.pi)
-                found += bool(np.any(np.max(d, axis=1) < 1e-6))
-        w0 = time.perf_counter()
-        _, valid = analytic.ik_all(spec, Ts)
-        batch = (time.perf_counter() - w0) / n
-        w0 = time.perf_counter()
-        for k in range(min(n, 2000)):
-            analytic.solutions_within_limits(spec, Ts[k], qs[k])
-        limited = (time.perf_counter() - w0) / min(n, 2000)
-        print(
-            f"  {name:5s} single: {_stats_us(wall)} (CPU median {np.median(cpu) * 1e6:.1f} µs); "
-            f"batched: {batch * 1e6:.2f} µs/pose; success {found / n:.2%} (the original configuration "
-            f"among the solutions), {total / n:.2f} solutions/pose, batch agrees: "
-            f"{int(valid.sum()) == total}; + limits/seed sorting {limited * 1e6:.1f} µs"
-        )
-
-
-def bench_numeric(n: int = 2000) -> None:
-    print(
-        f"numerical IK (LM + restarts) of the tool tip from a cold seed, {n} random reachable poses per robot"
-    )
-    for name in ROBOTS:
-        kin = Kinematics(load_arm(name))
-        rng = np.random.default_rng(1)
-        cold = np.deg2rad([0, 0, 90, 0, -90, 0]) if name == "nova5" else np.deg2rad([0, -90, 90, -90, -90, 0])
-        Ts = [kin.fk(q) for q in _random_q(kin.spec, rng, n)]
-        restart_rng = np.random.default_rng(2)
-        wall, cpu, ok = [], [], 0
-        for T in Ts:
-            w0, c0 = time.perf_counter(), time.process_time()
-            try:
-                q = kin.ik_numeric(T, cold, rng=restart_rng)
-            except RobotError:
-                q = None
-            wall.append(time.perf_counter() - w0)
-            cpu.append(time.process_time() - c0)
-            if q is not None and kin.pose_error(q, T)[0] < 1e-6:
-                ok += 1
-        print(
-            f"  {name:5s} success {ok / n:.2%}; {_stats_us(wall)} (CPU median {np.median(cpu) * 1e6:.1f} µs)"
-        )
 
 
 def _pick_place_queries(
@@ -207,8 +134,6 @@ def bench_trajectories() -> None:
 
 
 def main() -> None:
-    bench_analytic()
-    bench_numeric()
     bench_planning()
     bench_trajectories()
 

@@ -46,7 +46,6 @@ import enum
 import functools
 import math
 from dataclasses import dataclass
-from operator import itemgetter
 from typing import NamedTuple
 
 import numpy as np
@@ -715,7 +714,7 @@ def solve_within_limits(
     sols = _solve(ch, T, tol, seed_l, lower, upper)
     if not sols:
         return np.zeros((0, 6))
-    sols.sort(key=itemgetter(0))
+    sols.sort()  # by distance first (ties: by joints, deterministic)
     return np.array([s[1] for s in sols])
 
 
