@@ -106,7 +106,7 @@ class Cell:
                 "vision_port": self.vision.grpc_port,
             },
         )
-        self.task = TaskService(s, self.bus)
+        self.task = TaskService(s, self.bus, clock=self.controller_clock)
         await self._stack.enter_async_context(self.task)
         s = with_updates(s, grpc={"task_port": self.task.grpc_port})
         self.task.runner.between_cycles = self.next_scene if s.task.reset_scene_each_cycle else None
@@ -131,6 +131,13 @@ class Cell:
         cam = self.vision.camera if self.vision is not None else None
         if cam is not None:
             await asyncio.to_thread(cam.close)
+
+    def controller_clock(self) -> float:
+        """The controller's clock (s): the newest feedback packet's TimeStamp, as the driver received it."""
+        assert self.robot is not None
+        fb = self.robot.driver.client.feedback
+        assert fb is not None  # the driver has connected (and enabled) before the task starts
+        return fb.timestamp_ms / 1000.0
 
     # ------------------------------------------------------------------ twin specifics
     @property
@@ -187,25 +194,9 @@ class Cell:
         self.seed = seed
 
     async def settle(self, sim_seconds: float) -> None:
-        """Wait ``sim_seconds`` of simulated time (counted in controller feedback packets)."""
-        assert self.robot is not None and self.sim is not None
-        client = self.robot.driver.client
-        done = asyncio.Event()
-        need = max(1, round(sim_seconds / self.sim.period_s))
-        count = 0
-
-        def tick(_fb: object) -> None:
-            nonlocal count
-            count += 1
-            if count >= need:
-                done.set()
-
-        client.add_listener(tick)
-        try:
-            async with asyncio.timeout(60.0 + 10 * sim_seconds):
-                await done.wait()
-        finally:
-            client.remove_listener(tick)
+        """Wait ``sim_seconds`` of the controller's (simulated) clock."""
+        assert self.robot is not None
+        await self.robot.driver.client.wait_controller_time(sim_seconds)
 
     async def next_scene(self) -> None:
         await self.reset_scene(self.seed + 1)

@@ -2,7 +2,10 @@
 
 A thin shell around :class:`Orchestrator`: it runs cycles on request, publishes
 status on every state change (and at ``task.status_rate_hz``), publishes one
-PickEvent per pick, and turns stop / e-stop into immediate robot commands.
+PickEvent per pick, and turns stop / e-stop into immediate robot commands. Cycle and
+stage times are on the controller's clock: the composition root may pass it in (the
+in-process cell reads the driver's feedback); otherwise the service follows the
+TimeStamp of the robot's joint states on the bus.
 """
 
 from __future__ import annotations
@@ -33,6 +36,32 @@ from services.task.states import CycleState, PickOutcome, StateDeadlines, TaskCo
 log = logging.getLogger("pickplace.task.service")
 
 TASKS = tuple(TaskKind)
+
+
+class ControllerClock:
+    """The controller's clock as the task sees it (s): the TimeStamp of the newest robot joint state
+    on the bus. Before the first one arrives it reads the wall clock (said once in the log)."""
+
+    def __init__(self) -> None:
+        self._stamp_ns: int | None = None
+        self._warned = False
+
+    def observe(self, stamp_ns: int) -> None:
+        if stamp_ns > 0:
+            self._stamp_ns = stamp_ns
+
+    def on_joint_state(self, _key: str, payload: bytes) -> None:
+        msg = common_pb2.JointState()
+        msg.ParseFromString(payload)
+        self.observe(msg.source_stamp_ns)
+
+    def __call__(self) -> float:
+        if self._stamp_ns is None:
+            if not self._warned:
+                self._warned = True
+                log.warning("no robot joint state yet: cycle times read the wall clock until one arrives")
+            return time.time()
+        return self._stamp_ns / 1e9
 
 
 class Spawn(Protocol):
@@ -73,6 +102,7 @@ class TaskRunner:
         bus: Bus | None = None,
         between_cycles: Callable[[], object] | None = None,
         spawn: Spawn | None = None,
+        clock: Callable[[], float] = time.perf_counter,
     ):
         self.settings = settings
         self.clients = clients
@@ -98,6 +128,7 @@ class TaskRunner:
             clients.robot,
             cycle_config(settings),
             on_state=self._on_state,
+            clock=clock,
         )
 
     # ------------------------------------------------------------------ status
@@ -188,9 +219,7 @@ class TaskRunner:
                 if cycles and n >= cycles:
                     break
                 if self.between_cycles is not None:
-                    res = self.between_cycles()
-                    if asyncio.iscoroutine(res):
-                        await res
+                    await self._between_cycles()
                 await asyncio.sleep(self.settings.task.pause_between_cycles_s)
             self._on_state(CycleState.IDLE, f"finished {n} cycle(s)")
         except asyncio.CancelledError:
@@ -200,6 +229,20 @@ class TaskRunner:
             log.exception("task loop failed")
             self.last_error = f"{type(exc).__name__}: {exc}"
             self._on_state(CycleState.IDLE, f"task loop failed: {self.last_error}")
+
+    async def _between_cycles(self) -> None:
+        """Run the between-cycles hook (a new twin scene, say); its failure is reported and the loop goes
+        on with the cell as it is: one bad scene never ends the cell."""
+        assert self.between_cycles is not None
+        try:
+            res = self.between_cycles()
+            if asyncio.iscoroutine(res):
+                await res
+        except Exception as exc:
+            log.warning(
+                "between cycles: %s: %s; the next cycle runs in the current scene", type(exc).__name__, exc
+            )
+            self.last_error = f"between cycles: {type(exc).__name__}: {exc}"
 
     def start(self, task: str | None = None, cycles: int = 0) -> None:
         if self.running:
@@ -297,14 +340,24 @@ class TaskService(GrpcShell):
         bus: Bus | None = None,
         grpc_port: int | None = None,
         clients: CellClients | None = None,
+        clock: Callable[[], float] | None = None,
     ):
         super().__init__(settings.grpc.host, settings.grpc.task_port if grpc_port is None else grpc_port)
         self.settings = settings
         self.clients = clients or CellClients(settings)
-        self.runner = TaskRunner(settings, self.clients, bus, spawn=self.spawn)
+        self.bus = bus
+        # the controller's clock: given by the composition root, else followed on the bus
+        self.controller_clock = ControllerClock() if clock is None and bus is not None else None
+        task_clock = clock or self.controller_clock or time.perf_counter
+        self.runner = TaskRunner(settings, self.clients, bus, spawn=self.spawn, clock=task_clock)
 
     async def _start(self, stack: contextlib.AsyncExitStack) -> None:
         stack.push_async_callback(self.clients.close)
+        if self.controller_clock is not None and self.bus is not None:
+            sub = self.bus.subscribe_callback(
+                CellKeys(self.settings.cell_id).joint_states, self.controller_clock.on_joint_state
+            )
+            stack.callback(sub.undeclare)
         await self._serve_grpc(
             stack,
             lambda server: task_pb2_grpc.add_TaskControllerServicer_to_server(
