@@ -117,6 +117,9 @@ def evaluate(
     calibration_error_mm: Annotated[float, typer.Option(help="inject this camera position error")] = 0.0,
     calibration_error_deg: Annotated[float, typer.Option(help="inject this camera rotation error")] = 0.0,
     json_out: Annotated[str, typer.Option("--json", help="write the full report as JSON here")] = "",
+    load: Annotated[
+        int, typer.Option(min=0, help="run N busy processes beside the cell (outcomes must not change)")
+    ] = 0,
     profile: ProfileOpt = None,
     config: ConfigOpt = None,
 ) -> None:
@@ -143,7 +146,7 @@ def evaluate(
     error = None
     if calibration_error_mm or calibration_error_deg:
         error = (calibration_error_mm / 1000.0, calibration_error_deg)
-    report = _run(run_eval(s, trials, seed, task, error, console))
+    report = _run(run_eval(s, trials, seed, task, error, console, load=load))
     if report is None:
         return
     print_report(report, console)
