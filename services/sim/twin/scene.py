@@ -2,11 +2,15 @@
 
 Frames: the robot base frame, table top at z = 0. The rod's object frame has its z axis along the
 cylinder axis (MuJoCo's cylinder convention); a cube's frame is at its centre with faces along
-its axes. Same seed and settings → the same scene.
+its axes. Same seed and settings → the same scene, and every seed gives one: when a layout drawn
+from the seed cannot place every object (≈0.3 % of seeds with the sim profile), the layout is drawn
+again from seeds derived from it (``SeedSequence([seed, k])``) and the scene records how many redraws
+it took.
 """
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -18,7 +22,10 @@ from services.common.settings import TwinSceneSettings
 
 Array = np.ndarray
 
-MAX_PLACEMENT_ATTEMPTS = 2000
+log = logging.getLogger("pickplace.sim.scene")
+
+MAX_PLACEMENT_ATTEMPTS = 2000  # per object and layout draw
+MAX_LAYOUT_REDRAWS = 64  # a layout fails for ≈0.3 % of draws: 64 independent redraws never all fail
 
 COLORS_RGBA: dict[str, tuple[float, float, float, float]] = {
     "red": (0.80, 0.08, 0.08, 1.0),
@@ -62,12 +69,17 @@ class Scene:
     seed: int
     objects: tuple[SceneObject, ...]
     obstacle: BoxObstacle | None
+    layout_redraws: int = 0  # layouts drawn again from derived seeds before every object fitted
 
     def get(self, name: str) -> SceneObject:
         for obj in self.objects:
             if obj.name == name:
                 return obj
         raise InvalidInputError(f"scene has no object {name!r}; it has {[o.name for o in self.objects]}")
+
+
+class _Unplaceable(Exception):
+    """One layout draw could not place an object (the next draw comes from a derived seed)."""
 
 
 @dataclass(frozen=True)
@@ -122,10 +134,29 @@ def obstacle_of(settings: TwinSceneSettings) -> BoxObstacle | None:
 
 
 def sample_scene(settings: TwinSceneSettings, seed: int) -> Scene:
-    """Random rod pose (position in the pick zone, yaw) and cube layout, reproducible from ``seed``."""
+    """Random rod pose (position in the pick zone, yaw) and cube layout, reproducible from ``seed``;
+    redrawn from derived seeds when a draw cannot place every object (recorded on the scene)."""
     if not isinstance(seed, int | np.integer) or seed < 0:
         raise InvalidInputError(f"scene seed must be a non-negative integer, got {seed!r}")
-    rng = np.random.default_rng(int(seed))
+    last: _Unplaceable | None = None
+    for k in range(MAX_LAYOUT_REDRAWS + 1):
+        rng = np.random.default_rng(int(seed) if k == 0 else np.random.SeedSequence([int(seed), k]))
+        try:
+            objects, obstacle = _draw_layout(settings, rng)
+        except _Unplaceable as exc:
+            last = exc
+            continue
+        if k:
+            log.info("scene seed %d: layout redrawn %d time(s) (%s)", seed, k, last)
+        return Scene(seed=int(seed), objects=objects, obstacle=obstacle, layout_redraws=k)
+    raise InvalidInputError(
+        f"{last} — in {MAX_LAYOUT_REDRAWS + 1} layouts from seed {seed}: enlarge the zone or remove objects"
+    )
+
+
+def _draw_layout(
+    settings: TwinSceneSettings, rng: np.random.Generator
+) -> tuple[tuple[SceneObject, ...], BoxObstacle | None]:
     lo = np.asarray(settings.pick_zone_min_m, dtype=float)
     hi = np.asarray(settings.pick_zone_max_m, dtype=float)
     placed: list[_Footprint] = []
@@ -179,7 +210,7 @@ def sample_scene(settings: TwinSceneSettings, seed: int) -> Scene:
                 quat_wxyz=_yaw_quat(yaw, lying=False),
             )
         )
-    return Scene(seed=int(seed), objects=tuple(objects), obstacle=obstacle)
+    return tuple(objects), obstacle
 
 
 def _place(
@@ -197,9 +228,9 @@ def _place(
         fp = footprint(xy, yaw)
         if _inside(fp, lo, hi) and _clear(fp, placed, gap):
             return xy, yaw
-    raise InvalidInputError(
+    raise _Unplaceable(
         f"cannot place {name} in the pick zone {lo.tolist()}..{hi.tolist()} m with a {gap} m gap "
-        f"after {MAX_PLACEMENT_ATTEMPTS} tries: enlarge the zone or remove objects"
+        f"after {MAX_PLACEMENT_ATTEMPTS} tries"
     )
 
 
