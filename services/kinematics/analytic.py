@@ -55,11 +55,11 @@ from services.kinematics.robot_models import RobotSpec
 
 Array = np.ndarray
 
-# Two branches closer than this to their common singular configuration (rad, or the sine of the
-# J6-to-J2 axis angle for the wrist) are flagged singular: there they differ by less than 2e-6 rad.
+# A solution whose branch pair is this close to meeting (the sine of the half-angle between the
+# pair: ψ for the shoulder, θ3 for the elbow, the J6-to-J2 axis angle for the wrist) is flagged.
 SINGULAR_RAD = 1e-6
 # A cosine up to this far beyond ±1 is clipped (the pose is at, or a hair beyond, a boundary) and
-# the solution checked by FK; farther, the branch does not exist.
+# the solution polished and checked on the chain; farther, the branch does not exist.
 CLIP_SLACK = 1e-6
 # Beyond ±1 by no more than this is rounding: the clipped solution is exact without a check.
 _ROUNDING = 1e-12
@@ -84,7 +84,7 @@ class Singularity(enum.IntFlag):
     NONE = 0
     SHOULDER = 1  # the wrist on the J1 cylinder: the two shoulder branches meet
     ELBOW = 2  # arm stretched or folded: the two elbow branches meet
-    WRIST = 4  # J6 parallel to J2-J4: only θ4 + θ6 is determined, θ6 is one pick
+    WRIST = 4  # J6 parallel to J2-J4: the pose does not fix θ6 (θ2-θ4 follow it); θ6 is one pick
 
 
 class Branch(NamedTuple):
@@ -112,17 +112,6 @@ def dh_matrices(spec: RobotSpec, theta: Array, i: int) -> Array:
     T[..., 2, 3] = spec.d[i]
     T[..., 3, 3] = 1.0
     return T
-
-
-def _inv(T: Array) -> Array:
-    R = T[..., :3, :3]
-    p = T[..., :3, 3]
-    Ti = np.zeros_like(T)
-    Rt = np.swapaxes(R, -1, -2)
-    Ti[..., :3, :3] = Rt
-    Ti[..., :3, 3] = -np.einsum("...ij,...j->...i", Rt, p)
-    Ti[..., 3, 3] = 1.0
-    return Ti
 
 
 def fk(
@@ -401,13 +390,18 @@ def _closed_form(
     k1, k2, k3, k4, k5, k6 = o1 + b1, o2 + b2, o3 + b3, o4 + b4, o5 + b5, o6 + b6
     # limits l..h, checked as le..he (1e-9 slack); only the elbow joints (2-4, checked per solution)
     # are skipped when their whole window [seed − π, seed + π] lies within the limits
-    l1, l2, l3, l4, l5, l6 = lower if limited else _NO_LIMIT
-    h1, h2, h3, h4, h5, h6 = upper if limited else _NO_LIMIT
-    le1, le2, le3, le4, le5, le6 = l1 - 1e-9, l2 - 1e-9, l3 - 1e-9, l4 - 1e-9, l5 - 1e-9, l6 - 1e-9
-    he1, he2, he3, he4, he5, he6 = h1 + 1e-9, h2 + 1e-9, h3 + 1e-9, h4 + 1e-9, h5 + 1e-9, h6 + 1e-9
-    check2 = limited and not (l2 <= b2 and b2 + tau <= h2)
-    check3 = limited and not (l3 <= b3 and b3 + tau <= h3)
-    check4 = limited and not (l4 <= b4 and b4 + tau <= h4)
+    if limited:
+        l1, l2, l3, l4, l5, l6 = lower
+        h1, h2, h3, h4, h5, h6 = upper
+        le1, le2, le3, le4, le5, le6 = l1 - 1e-9, l2 - 1e-9, l3 - 1e-9, l4 - 1e-9, l5 - 1e-9, l6 - 1e-9
+        he1, he2, he3, he4, he5, he6 = h1 + 1e-9, h2 + 1e-9, h3 + 1e-9, h4 + 1e-9, h5 + 1e-9, h6 + 1e-9
+        check2 = not (l2 <= b2 and b2 + tau <= h2)
+        check3 = not (l3 <= b3 and b3 + tau <= h3)
+        check4 = not (l4 <= b4 and b4 + tau <= h4)
+    else:
+        l1 = l2 = l3 = l4 = l5 = l6 = h1 = h2 = h3 = h4 = h5 = h6 = 0.0
+        le1 = le2 = le3 = le4 = le5 = le6 = he1 = he2 = he3 = he4 = he5 = he6 = 0.0
+        check2 = check3 = check4 = False
     r7 = cf.r7
     if r7 is not None:  # T' = T O7⁻¹: rotation R R7ᵀ
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = (
@@ -668,7 +662,6 @@ def _same(a: tuple[float, ...], b: tuple[float, ...]) -> bool:
 
 
 _NO_LIMITS: list[float] = []
-_NO_LIMIT = (0.0,) * 6  # placeholders when no limits apply
 
 
 def _solve(
