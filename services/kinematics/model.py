@@ -171,11 +171,18 @@ class Kinematics:
         self._ik_chain = self._closed_form_chain()
 
     def _closed_form_chain(self) -> analytic.Chain | None:
-        """The URDF's joint chain ending at the tool tip, when the closed form applies to it."""
-        if self.spec.name not in ("nova5", "ur5e", "ur3"):
-            return None  # an arm read from some URDF (arm_from_urdf): numerical IK only
-        ch = analytic.chain(self.spec, KinematicModel.URDF).with_tool(self.arm.T_flange_tool)
-        return ch if ch.closed_form is not None else None
+        """The URDF's joint chain ending at the tool tip, when the closed form applies to it and it
+        is this arm's URDF (checked against pinocchio: an arm read with ``arm_from_urdf`` under one
+        of our names but from another file gets the numerical IK only)."""
+        try:
+            ch = analytic.chain(self.spec, KinematicModel.URDF).with_tool(self.arm.T_flange_tool)
+        except ConfigurationError:
+            return None  # not one of our arms
+        if ch.closed_form is None:
+            return None
+        probe = np.array([[0.0] * 6, [0.3, -1.1, 1.7, -0.4, 0.9, 2.2]])
+        same = all(np.abs(analytic.chain_fk(ch, q) - self.fk(q)).max() < 1e-12 for q in probe)
+        return ch if same else None
 
     @property
     def dof(self) -> int:

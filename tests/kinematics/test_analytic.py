@@ -17,7 +17,7 @@ from services.kinematics import analytic
 from services.kinematics.analytic import Chain, KinematicModel, Singularity
 from services.kinematics.model import Kinematics, arm_from_urdf, load_arm
 from services.kinematics.robot_models import NOVA5, UR3, UR5E, get_robot
-from services.kinematics.urdf import arm_joints, flange_link
+from services.kinematics.urdf import ToolGeometry, arm_joints, flange_link
 
 ROBOTS = ("nova5", "ur5e", "ur3")
 URDF = KinematicModel.URDF
@@ -130,6 +130,17 @@ def test_public_ik_is_exact_on_the_tool_pose(kin: Kinematics) -> None:
             pos, rot = kin.pose_error(q, T)
             assert pos < EXACT and rot < 1e-7  # pose_error's acos resolves ~1e-8 rad only
             assert np.all(q >= kin.limits.lower - 1e-9) and np.all(q <= kin.limits.upper + 1e-9)
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_public_ik_with_a_turned_and_offset_tool_is_exact(name: str) -> None:
+    kin = Kinematics(load_arm(name, ToolGeometry(tip_xyz=(0.01, -0.02, 0.2), tip_rpy=(0.1, -0.2, 0.3))))
+    assert kin.has_analytic_ik()
+    for q0 in random_q(kin, np.random.default_rng(12), 100):
+        T = kin.fk(q0)
+        sols = kin.ik_analytic(T, q0)
+        assert joint_gap(sols[0], q0) < SAME_RAD
+        assert max(kin.pose_error(q, T)[0] for q in sols) < EXACT
 
 
 def test_dh_model_stays_the_default_and_exact_on_the_dh_table() -> None:
@@ -291,6 +302,10 @@ def test_a_chain_without_the_structure_has_no_closed_form() -> None:
         analytic._solve(broken, np.eye(4), 1e-6)
     generic = Kinematics(arm_from_urdf(load_arm("nova5").urdf, "Link6", name="generic"))
     assert not generic.has_analytic_ik()
+    # one of our names on another arm's URDF: the closed form would solve the wrong chain
+    impostor = Kinematics(arm_from_urdf(load_arm("ur5e").urdf, "tool_tip", name="nova5"))
+    assert not impostor.has_analytic_ik()
+    assert Kinematics(load_arm("ur5e", ToolGeometry(tip_rpy=(0.1, 0.2, 0.3)))).has_analytic_ik()
     with pytest.raises(ConfigurationError, match="closed-form"):
         generic.ik_analytic(np.eye(4))
 
