@@ -88,6 +88,29 @@ class PlannedPick:
     plan: GraspPlan
     trajs: list[JointTrajectory | None]
     obstacles: tuple[SeenBox, ...]
+    # the motions from waypoint ``rest_from`` on, still being planned while the arm makes the first ones
+    rest: asyncio.Task[list[JointTrajectory | None]] | None = None
+    rest_from: int = 0
+
+    async def settle(self, seconds: float) -> None:
+        """Wait for the rest of the motions (PlanningError / RobotError as planning raised them)."""
+        if self.rest is None:
+            return
+        task, self.rest = self.rest, None
+        try:
+            async with asyncio.timeout(seconds):
+                rest = await task
+        except TimeoutError:
+            raise PlanningError(
+                f"planning the moves from waypoint {self.rest_from} took over {seconds:.0f} s"
+            ) from None
+        for i in range(self.rest_from, len(self.trajs)):
+            self.trajs[i] = rest[i]
+
+    def cancel(self) -> None:
+        if self.rest is not None:
+            self.rest.cancel()
+            self.rest = None
 
 
 @dataclass(frozen=True)
@@ -203,6 +226,14 @@ class Orchestrator:
     ) -> bool:
         """Execute the plan, resuming it after cleared alarms; False: detect and plan again."""
         self._progress = Progress()
+        try:
+            return await self._carry_out_plan(planned, obs, out, attempts)
+        finally:
+            planned.cancel()  # a plan given up on stops planning its later moves
+
+    async def _carry_out_plan(
+        self, planned: PlannedPick, obs: Observation, out: PickOutcome, attempts: Attempts
+    ) -> bool:
         while True:
             try:
                 await self._execute(planned, self._progress)
@@ -227,8 +258,8 @@ class Orchestrator:
                     w = planned.plan.waypoints[self._progress.index]
                     self._enter(state_for(w.name), f"resuming at {w.name} after {type(exc).__name__}")
                     continue
-                if action is Action.REGRASP:
-                    await self._back_off_open()
+                if action is Action.REGRASP or (action is Action.NEXT_GRASP and self._progress.index > 0):
+                    await self._back_off_open()  # out of the grasp before looking again
                 return False  # REGRASP / NEXT_GRASP: detect again and plan from where the arm is
 
     # ------------------------------------------------------------------ DETECT
@@ -325,8 +356,17 @@ class Orchestrator:
         grasp_wp = next((w for w in plan.waypoints if w.gripper is GripperCommand.CLOSE), plan.waypoints[0])
         out.pick_pose = _pose_list(grasp_wp.T_base_tool)
         out.place_pose = [*map(float, plan.place_position), 0.0, 0.0, 0.0, 1.0]
-        trajs = await self._motions(plan, range(len(plan.waypoints)), q, obstacles)
-        return PlannedPick(plan, trajs, obstacles)
+        # the arm sets off as soon as the moves to its first stop are planned; the rest plans meanwhile
+        n = len(plan.waypoints)
+        first_stop = next((i for i in range(n) if _move(plan, i) is not None and not _blends(plan, i)), n - 1)
+        trajs = await self._motions(plan, range(first_stop + 1), q, obstacles)
+        planned = PlannedPick(plan, trajs, obstacles, rest_from=first_stop + 1)
+        if first_stop + 1 < n:
+            q_stop = next((t.positions[-1] for t in reversed(trajs) if t is not None), q)
+            planned.rest = asyncio.ensure_future(
+                self._motions(plan, range(first_stop + 1, n), q_stop, obstacles)
+            )
+        return planned
 
     async def _motions(
         self, plan: GraspPlan, indices: range, start: np.ndarray, obstacles: tuple[SeenBox, ...]
@@ -367,6 +407,8 @@ class Orchestrator:
         q_known: np.ndarray | None = None  # where the last move ended (no round trip for the joints)
         in_motion = False  # the last trajectory ends in motion: this one continues it
         for i in range(resume.index, len(plan.waypoints)):
+            if i >= planned.rest_from:
+                await planned.settle(cfg.deadlines.plan_s)
             w, traj = plan.waypoints[i], planned.trajs[i]
             self._progress = Progress(i, reached=i == resume.index and resume.reached)
             state = state_for(w.name)
@@ -378,16 +420,19 @@ class Orchestrator:
             continues = traj is not None and _ends_in_motion(traj)
             if traj is not None and not self._progress.reached:
                 q_now = q_known if q_known is not None else await self.robot.joints()
-                if not in_motion and np.max(np.abs(traj.positions[0] - q_now)) > RESUME_TOLERANCE_RAD:
-                    # the arm is not where the plan assumed (a guarded stop, an alarm): replan from here
-                    traj = (
-                        await self._timed(
-                            self._motions(plan, range(i, i + 1), q_now, planned.obstacles),
-                            cfg.deadlines.plan_s,
-                            f"replanning {w.name}",
-                        )
-                    )[i]
-                    continues = False
+                off = np.max(np.abs(traj.positions[0] - q_now)) > RESUME_TOLERANCE_RAD
+                if not in_motion and (off or _starts_in_motion(traj)):
+                    # the arm is not where the plan assumed (a guarded stop, an alarm), or it is at rest
+                    # where the plan flows through: replan from here to the end of this blended run
+                    end = _run_end(planned, i)
+                    again = await self._timed(
+                        self._motions(plan, range(i, end + 1), q_now, planned.obstacles),
+                        cfg.deadlines.plan_s,
+                        f"replanning {w.name}",
+                    )
+                    planned.trajs[i : end + 1] = again[i : end + 1]
+                    traj = planned.trajs[i]
+                    continues = traj is not None and _ends_in_motion(traj)
                 if traj is not None:
                     res = await self._timed(
                         self.robot.execute(traj, w.guard_force_n, continues=continues),
@@ -405,6 +450,8 @@ class Orchestrator:
                     if w.guard_force_n > 0 and not res.stopped_early:
                         log.warning("%s: no touch-down detected within the overtravel", w.name)
             self._progress = Progress(i, reached=True)
+            if i + 1 == planned.rest_from:
+                await planned.settle(cfg.deadlines.plan_s)  # the whole way planned before the jaws close
             if w.gripper is not None and not (in_motion and w.gripper is GripperCommand.OPEN):
                 close = w.gripper is GripperCommand.CLOSE
                 g = await self._timed(
@@ -530,6 +577,18 @@ def _blends(plan: GraspPlan, i: int) -> bool:
 
 def _ends_in_motion(traj: JointTrajectory) -> bool:
     return bool(np.any(np.abs(traj.velocities[-1]) > 1e-9))
+
+
+def _starts_in_motion(traj: JointTrajectory) -> bool:
+    return bool(np.any(np.abs(traj.velocities[0]) > 1e-9))
+
+
+def _run_end(planned: PlannedPick, i: int) -> int:
+    """The last waypoint of the blended run that waypoint ``i`` is in (where the arm comes to rest)."""
+    end = i
+    while end + 1 < len(planned.trajs) and (t := planned.trajs[end]) is not None and _ends_in_motion(t):
+        end += 1
+    return end
 
 
 class _RecordingRobot:

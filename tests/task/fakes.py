@@ -176,6 +176,11 @@ class FakeMotion:
         self.requests: list[MotionRequest] = []
         self.blending = blending  # a move marked ``blend`` ends in motion (as the motion service cuts it)
 
+    def labelled(self, labels: list[str]) -> MotionRequest:
+        """The one request for exactly these moves."""
+        (found,) = [r for r in self.requests if r.labels == labels]
+        return found
+
     async def plan_moves(
         self, start: np.ndarray, moves: Sequence[Move], obstacles: tuple[SeenBox, ...]
     ) -> list[JointTrajectory | None]:

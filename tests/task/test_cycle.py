@@ -9,6 +9,7 @@ from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.task.ports import SeenCube
 from services.task.states import CycleState
 from tests.task.fakes import HELD_ROD, HOME, FakeCell, FakeVision, rod_at, seen
+from tests.task.fakes import joints_at as fake_joints_at
 
 CLOSE, OPEN = GripperCommand.CLOSE, GripperCommand.OPEN
 
@@ -49,14 +50,18 @@ async def test_a_rod_cycle_runs_every_state_and_sends_the_plan_in_order() -> Non
     assert cell.wait.waits == []
 
 
-async def test_the_whole_plan_is_one_motion_request_with_each_moves_scene() -> None:
+async def test_the_plan_is_two_motion_requests_with_each_moves_scene() -> None:
+    """One request to the first stop (the arm sets off with it), one for the rest from there."""
     cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))))
     await cell.run()
-    first = cell.motion.requests[0]
+    first, rest = cell.motion.requests[:2]
     # RELEASE does not move (a gripper action where the arm stands): it is not sent
-    assert first.labels == ["SAFE_HOME", "PRE_GRASP", "GRASP", "LIFT", "REORIENT", "PLACE", "RETRACT"]
+    assert first.labels == ["SAFE_HOME", "PRE_GRASP", "GRASP"]
+    assert rest.labels == ["LIFT", "REORIENT", "PLACE", "RETRACT"]
     assert first.start == tuple(HOME)
-    by = {m.label: m for m in first.moves}
+    grasp = next(w for w in cell.grasp.plans[0].waypoints if w.name == "GRASP")
+    assert np.allclose(rest.start, fake_joints_at(grasp.T_base_tool[:3, 3]))
+    by = {m.label: m for m in first.moves + rest.moves}
     assert [by[n].kind for n in ("SAFE_HOME", "PRE_GRASP", "GRASP")] == [
         MotionKind.JOINT,
         MotionKind.JOINT,
@@ -71,8 +76,8 @@ async def test_the_whole_plan_is_one_motion_request_with_each_moves_scene() -> N
     place = next(w for w in cell.grasp.plans[0].waypoints if w.name == "PLACE")
     assert by["PLACE"].target[2, 3] == pytest.approx(place.T_base_tool[2, 3] - 0.02)
     # afterwards: RETRACT replanned from where PLACE touched down, then the way home
-    assert [r.labels for r in cell.motion.requests[1:]] == [["RETRACT"], ["HOME"]]
-    assert cell.motion.requests[1].start != tuple(by["PLACE"].target[:3, 3]) + (0.0, 0.0, 0.0)
+    assert [r.labels for r in cell.motion.requests[2:]] == [["RETRACT"], ["HOME"]]
+    assert cell.motion.requests[2].start != tuple(by["PLACE"].target[:3, 3]) + (0.0, 0.0, 0.0)
 
 
 async def test_the_arm_stops_only_where_physics_asks() -> None:
@@ -82,7 +87,7 @@ async def test_the_arm_stops_only_where_physics_asks() -> None:
     cell.motion.blending = True
     outcome = await cell.run()
     assert outcome.success
-    by = {m.label: m for m in cell.motion.requests[0].moves}
+    by = {m.label: m for r in cell.motion.requests[:2] for m in r.moves}
     assert {n for n, m in by.items() if m.blend} == {"SAFE_HOME", "PRE_GRASP", "LIFT"}
     assert cell.robot.continued == ["PRE_GRASP", "LIFT"]
     assert cell.robot.commands[:5] == [
