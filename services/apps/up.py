@@ -64,7 +64,7 @@ def _status_table(runner, started: float, last: PickOutcome | None) -> Group:  #
         "running for",
         f"{time.perf_counter() - started:.0f} s",
     )
-    lines = [t]
+    lines: list[Table | Text] = [t]
     if last is not None:
         colour = "green" if last.success else "red"
         lines.append(
@@ -127,7 +127,10 @@ def _calibration_executor(cell: Cell):  # type: ignore[no-untyped-def]
             raise InvalidInputError("stop the task before calibrating: the arm is busy")
         s = cell.settings
         cal = s.vision.calibration.model_copy(update={"n_poses": num_poses})
-        guess = cell.vision.T_base_camera  # type: ignore[union-attr]
+        vision = cell.vision
+        if vision is None or vision.camera is None:
+            raise InvalidInputError("calibration needs the cell's vision service and its camera")
+        guess = vision.T_base_camera
         if guess is None:
             raise InvalidInputError(
                 "calibration needs a rough camera pose: write one with `pickplace calibrate-manual`"
@@ -135,9 +138,9 @@ def _calibration_executor(cell: Cell):  # type: ignore[no-untyped-def]
         async with GrpcCalibrationRobot(s, speed_ratio=30) as robot:
             result, _data = await run_calibration(
                 robot,
-                cell.vision.camera,
+                vision.camera,
                 cal,
-                guess,  # type: ignore[union-attr]
+                guess,
                 progress=lambda done, total, msg: progress(done / max(total, 1), msg),
             )
         return CalibrationOutcome(

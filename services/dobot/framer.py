@@ -65,7 +65,9 @@ class CommandFramer:
 
 def _split_top(text: str) -> list[str]:
     """Split on commas that are not inside braces/brackets/parentheses."""
-    parts, depth, cur = [], 0, []
+    parts: list[str] = []
+    cur: list[str] = []
+    depth = 0
     for c in text:
         if c in "{[(":
             depth += 1

@@ -295,7 +295,7 @@ class SimController:
         base = np.minimum(np.deg2rad(self.config.max_joint_acc_deg_s2), self.spec.max_acceleration)
         return base * max(a / 100.0, 1e-3)
 
-    def enqueue(self, key: str, run: Callable[[], Profile | None], text: str) -> list[int]:
+    def enqueue(self, key: str, run: Callable[[], Profile | None], text: str) -> list[object]:
         if not self.enabled:
             raise CommandError(dobot.ErrorID.FAILED)
         cid = self.next_id
@@ -357,7 +357,7 @@ class SimController:
         tcp_acc = MAX_TCP_ACC_MM_S2 * max(a / 100.0, 1e-3)
         floor = 0.0
         if length_mm > 0:
-            floor = trapezoid_time(length_mm, tcp_speed, tcp_acc)
+            floor = trapezoid_time(float(length_mm), tcp_speed, tcp_acc)
         return PathProfile(path, floor, self._vmax(v), self._amax(a))
 
     def set_do(self, index: int, on: bool, tool: bool) -> None:

@@ -7,7 +7,7 @@ values; a refused command raises :class:`~services.sim.command_args.CommandError
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -35,7 +35,8 @@ from services.sim.motion_profiles import LinearInTime, Profile
 if TYPE_CHECKING:
     from services.sim.controller import SimController
 
-Handler = Callable[["SimController", dobot.ParsedCommand], object]
+# what a handler answers: the reply values, or a preformatted value text
+Handler = Callable[["SimController", dobot.ParsedCommand], "Sequence[object] | str"]
 
 
 def _h_enable(ctl: SimController, cmd: dobot.ParsedCommand) -> list[object]:

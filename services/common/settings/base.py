@@ -33,5 +33,6 @@ class Model(BaseModel):
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
 CubeColor = Literal["red", "blue", "green", "black"]
+ALL_CUBE_COLORS: tuple[CubeColor, ...] = ("red", "blue", "green", "black")
 
 Vec6 = tuple[float, float, float, float, float, float]

@@ -6,7 +6,7 @@ from typing import Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from services.common.settings.base import CubeColor, Model, Vec2, Vec3, is_loopback
+from services.common.settings.base import ALL_CUBE_COLORS, CubeColor, Model, Vec2, Vec3, is_loopback
 
 
 class TwinPhysicsSettings(Model):
@@ -80,7 +80,7 @@ class TwinSceneSettings(Model):
     rod_diameter_m: float = Field(0.022, gt=0.004, le=0.08)
     rod_wall_m: float = Field(0.002, gt=0, le=0.04)
     rod_mass_kg: float = Field(0.10, gt=0, le=2)
-    cubes: list[CubeColor] = Field(default_factory=lambda: ["red", "blue", "green", "black"])
+    cubes: list[CubeColor] = Field(default_factory=lambda: list(ALL_CUBE_COLORS))
     cube_size_m: float = Field(0.05, gt=0.01, le=0.08)
     cube_mass_kg: float = Field(0.075, gt=0, le=2)
     min_gap_m: float = Field(0.04, ge=0, le=0.3, description="clearance between objects for the fingers")
