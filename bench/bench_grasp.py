@@ -21,7 +21,7 @@ import numpy as np
 
 from services.common.modes import GripperCommand, MotionKind
 from services.common.settings import Settings, load_settings
-from services.grasp.collision import MotionCollisionCheck, tool_geometry
+from services.grasp.collision import MotionCollisionCheck
 from services.grasp.cube import CubeObservation, plan_pick_and_place
 from services.grasp.force_closure import ContactModel, evaluate_force_closure
 from services.grasp.geometry import pose, rotation_z
@@ -30,6 +30,7 @@ from services.grasp.rod import RodObservation, plan_pick_and_stand
 from services.grasp.synthesis import ObjectSpec, compute_grasps
 from services.kinematics.collision import Box
 from services.kinematics.robot_models import get_robot
+from services.kinematics.tool import tool_geometry
 
 Array = np.ndarray
 

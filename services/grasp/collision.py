@@ -18,13 +18,13 @@ from services.common.settings import Settings
 from services.grasp.plan import HeldObject
 from services.kinematics.collision import ATTACHED, TABLE, AttachedObject, Box, CollisionChecker, Scene
 from services.kinematics.model import ArmModel, load_arm
-from services.kinematics.urdf import tool_geometry
+from services.kinematics.tool import tool_geometry
 
 Array = np.ndarray
 
 MAX_CACHED = 16
 
-__all__ = ["MotionCollisionCheck", "tool_geometry"]
+__all__ = ["MotionCollisionCheck"]
 
 
 class MotionCollisionCheck:

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import coal
 import numpy as np
 import pinocchio as pin
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import lapack
 
 from services.common.errors import ConfigurationError, IKFailureError, InvalidInputError
@@ -29,8 +29,9 @@ from services.kinematics import analytic
 from services.kinematics.analytic import KinematicModel
 from services.kinematics.poses import check_pose, pose_text
 from services.kinematics.robot_models import RobotSpec, get_robot
+from services.kinematics.tool import ToolGeometry
 from services.kinematics.trajectory import Array, JointLimits, joint_vector
-from services.kinematics.urdf import ToolGeometry, flange_link, robot_urdf
+from services.kinematics.urdf import flange_link, robot_urdf
 
 TOOL_FRAME = "tool_tip"
 # Below this Yoshikawa manipulability an IK solution counts as near-singular (UR-size arms
@@ -324,7 +325,7 @@ class Kinematics:
         max_step: float,
         lo: Array,
         hi: Array,
-        cont: Array,
+        cont: NDArray[np.bool_],
     ) -> Array | None:
         """One LM run from q; None when it stalls far from the target or runs out of iterations."""
         model, data = self.model, self.data

@@ -20,8 +20,8 @@ offsets of the DH table, mapped into the URDF link frame), written as URDF
 checks them as capsules (rounded ends, slightly conservative). Inertials are rough
 solid-cylinder estimates, marked as such: no vendor data was available.
 
-The tool: a fixed ``gripper`` link on the flange carrying the palm and finger
-collision shapes, and a ``tool_tip`` frame (fixed joint) at the configurable offset.
+The tool (:class:`~services.kinematics.tool.ToolGeometry`): a fixed ``gripper`` link on the flange carrying
+the palm and finger collision shapes, and a ``tool_tip`` frame (fixed joint) at the configurable offset.
 ``config/robots/*.urdf`` are generated from here with the default tool
 (``python -m services.kinematics.urdf``); a test checks they are current.
 """
@@ -35,11 +35,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
-from services.common.errors import ConfigurationError
-from services.common.settings import Settings
 from services.kinematics.robot_models import ROBOTS_DIR, RobotSpec, get_robot
+from services.kinematics.tool import ToolGeometry
 
 Array = np.ndarray
 
@@ -56,52 +56,6 @@ LINK_MASSES_KG: dict[str, tuple[float, ...]] = {
     "ur3": (2.0, 2.0, 3.4, 1.3, 0.8, 0.8, 0.35),
 }
 BASE_HEIGHT_M = 0.06  # fixed base capsule axis, from the mounting face up (plus its radius)
-
-
-@dataclass(frozen=True)
-class ToolGeometry:
-    """The gripper on the flange, in the flange frame (m, rad).
-
-    ``tip_xyz``/``tip_rpy``: the ``tool_tip`` frame (the TCP). The palm is a capsule
-    along +z from the flange; the jaws are one box (open width along the tool y axis)
-    ending ``finger_clearance`` short of the tip, so a grasp at the table surface
-    does not count as a collision of the jaw tips.
-    """
-
-    tip_xyz: tuple[float, float, float] = (0.0, 0.0, 0.16)  # = the default gripper.tcp_offset_m
-    tip_rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    palm_radius: float = 0.045
-    palm_length: float = 0.09
-    finger_box: tuple[float, float, float] = (0.03, 0.12, 0.04)
-    finger_clearance: float = 0.015
-
-    def __post_init__(self) -> None:
-        values = [
-            *self.tip_xyz,
-            *self.tip_rpy,
-            self.palm_radius,
-            self.palm_length,
-            *self.finger_box,
-            self.finger_clearance,
-        ]
-        if not all(np.isfinite(values)):
-            raise ConfigurationError(f"tool geometry has non-finite values: {self}")
-        if (
-            self.palm_radius <= 0
-            or self.palm_length < 0
-            or min(self.finger_box) <= 0
-            or self.finger_clearance < 0
-        ):
-            raise ConfigurationError(f"tool geometry sizes must be positive: {self}")
-
-    def T_flange_tool(self) -> Array:
-        T = np.eye(4)
-        T[:3, :3] = Rotation.from_euler("xyz", self.tip_rpy).as_matrix()
-        T[:3, 3] = self.tip_xyz
-        return T
-
-    def finger_center_z(self) -> float:
-        return float(self.tip_xyz[2] - self.finger_clearance - self.finger_box[2] / 2)
 
 
 # --- vendor Nova5 joint table (spec §6.2, verbatim) -----------------------------------------------
@@ -178,7 +132,7 @@ def _fmt(v: float) -> str:
     return "0" if s in ("-0", "0") else s
 
 
-def _written(v: object) -> tuple[float, ...]:
+def _written(v: ArrayLike) -> tuple[float, ...]:
     """Values as the URDF text gives them back (15 significant digits)."""
     return tuple(float(_fmt(x)) for x in np.ravel(v))
 
@@ -243,7 +197,7 @@ def arm_joints(spec: RobotSpec) -> tuple[JointOrigin, ...]:
     return (*joints, flange)
 
 
-def _vec(v: object) -> str:
+def _vec(v: ArrayLike) -> str:
     return " ".join(_fmt(x) for x in np.ravel(v))
 
 
@@ -341,7 +295,7 @@ def _cylinder_between(a: Array, b: Array) -> tuple[Array, Array, float]:
     return np.round((a + b) / 2, 9), np.round(rpy, 9), round(length, 9)
 
 
-def _collision_xml(name: str, xyz: Array, rpy: Array, geometry: str) -> str:
+def _collision_xml(name: str, xyz: ArrayLike, rpy: ArrayLike, geometry: str) -> str:
     return (
         f'    <collision name="{name}">\n'
         f'      <origin xyz="{_vec(xyz)}" rpy="{_vec(rpy)}"/>\n'
@@ -379,9 +333,9 @@ def _joint_xml(
     name: str,
     parent: str,
     child: str,
-    xyz: object,
-    rpy: object,
-    axis: object | None,
+    xyz: ArrayLike,
+    rpy: ArrayLike,
+    axis: ArrayLike | None,
     lower: float = 0.0,
     upper: float = 0.0,
     velocity: float = 0.0,
@@ -484,16 +438,3 @@ if __name__ == "__main__":
     for p in write_default_urdfs():
         print(f"wrote {p}")
     sys.exit(0)
-
-
-def tool_geometry(settings: Settings) -> ToolGeometry:
-    """The tool of ``settings``: TCP ``gripper.tcp_offset_m`` along the flange z, shapes from ``motion.tool``."""
-    t = settings.motion.tool
-    return ToolGeometry(
-        tip_xyz=(0.0, 0.0, settings.gripper.tcp_offset_m),
-        tip_rpy=tuple(math.radians(v) for v in t.tip_rpy_deg),  # type: ignore[arg-type]
-        palm_radius=t.palm_radius_m,
-        palm_length=t.palm_length_m,
-        finger_box=t.finger_box_m,
-        finger_clearance=t.finger_clearance_m,
-    )

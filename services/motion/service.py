@@ -28,8 +28,8 @@ from services.common.shell import GrpcShell
 from services.kinematics.collision import AttachedObject, Box, Scene
 from services.kinematics.model import ArmModel, Kinematics, load_arm
 from services.kinematics.robot_models import ROBOTS
+from services.kinematics.tool import tool_geometry
 from services.kinematics.trajectory import Array, JointTrajectory
-from services.kinematics.urdf import tool_geometry
 from services.motion.planner import BlendPart, MotionPlanner, Plan, PlannerConfig, blend
 
 log = logging.getLogger("pickplace.motion.service")

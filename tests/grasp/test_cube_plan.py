@@ -9,13 +9,14 @@ from services.common.errors import IKFailureError, InvalidInputError
 from services.common.frames import invert_transform
 from services.common.modes import GripperCommand
 from services.common.settings import load_settings
-from services.grasp.collision import MotionCollisionCheck, tool_geometry
+from services.grasp.collision import MotionCollisionCheck
 from services.grasp.cube import CubeObservation, drop_zone, plan_pick_and_place
 from services.grasp.geometry import pose, rotation_z
 from services.grasp.plan import PickPlan
 from services.kinematics.analytic import fk
 from services.kinematics.collision import Box
 from services.kinematics.robot_models import get_robot
+from services.kinematics.tool import tool_geometry
 
 SETTINGS = load_settings("sim", overrides={"logging": {"file": None}})
 CFG = SETTINGS.grasp

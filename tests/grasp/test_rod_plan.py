@@ -13,7 +13,7 @@ from services.common.errors import CollisionError, IKFailureError, InvalidInputE
 from services.common.frames import invert_transform
 from services.common.modes import GripperCommand, MotionKind
 from services.common.settings import GraspSettings, load_settings
-from services.grasp.collision import MotionCollisionCheck, tool_geometry
+from services.grasp.collision import MotionCollisionCheck
 from services.grasp.geometry import pose
 from services.grasp.plan import PickPlan
 from services.grasp.rod import RodObservation, plan_pick_and_stand
@@ -22,6 +22,7 @@ from services.kinematics.cartesian import cartesian_path
 from services.kinematics.collision import Box
 from services.kinematics.model import Kinematics, load_arm
 from services.kinematics.robot_models import get_robot
+from services.kinematics.tool import tool_geometry
 
 SETTINGS = load_settings("sim", overrides={"logging": {"file": None}})
 CFG = SETTINGS.grasp

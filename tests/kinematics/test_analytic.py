@@ -13,11 +13,13 @@ import numpy as np
 import pytest
 
 from services.common.errors import ConfigurationError
-from services.kinematics import analytic
-from services.kinematics.analytic import Chain, KinematicModel, Singularity
+from services.kinematics import analytic, closed_form
+from services.kinematics.analytic import KinematicModel, Singularity
+from services.kinematics.chain import Chain
 from services.kinematics.model import Kinematics, arm_from_urdf, load_arm
 from services.kinematics.robot_models import NOVA5, UR3, UR5E, get_robot
-from services.kinematics.urdf import ToolGeometry, arm_joints, flange_link
+from services.kinematics.tool import ToolGeometry
+from services.kinematics.urdf import arm_joints, flange_link
 
 ROBOTS = ("nova5", "ur5e", "ur3")
 URDF = KinematicModel.URDF
@@ -299,7 +301,7 @@ def test_a_chain_without_the_structure_has_no_closed_form() -> None:
     broken = Chain("tilted", (*ch.origins[:3], tilted, *ch.origins[4:]), ch.offsets)
     assert broken.closed_form is None
     with pytest.raises(ConfigurationError, match="structure"):
-        analytic._solve(broken, np.eye(4), 1e-6)
+        closed_form.solve(broken, np.eye(4), 1e-6)
     generic = Kinematics(arm_from_urdf(load_arm("nova5").urdf, "Link6", name="generic"))
     assert not generic.has_analytic_ik()
     # one of our names on another arm's URDF: the closed form would solve the wrong chain

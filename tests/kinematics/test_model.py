@@ -14,7 +14,8 @@ from services.common.frames import make_transform, transform_to_dobot_pose
 from services.kinematics import analytic
 from services.kinematics.model import Kinematics, arm_from_urdf, load_arm
 from services.kinematics.robot_models import NOVA5, UR3, UR5E, get_robot
-from services.kinematics.urdf import ToolGeometry, flange_link, link_segments, stale_urdfs
+from services.kinematics.tool import ToolGeometry
+from services.kinematics.urdf import flange_link, link_segments, stale_urdfs
 
 ROBOTS = ("nova5", "ur5e", "ur3")
 

@@ -16,8 +16,8 @@ from services.common.errors import CollisionError, IKFailureError, InvalidInputE
 from services.common.frames import make_transform
 from services.common.messages import matrix_to_pose, pose_to_matrix
 from services.kinematics.model import Kinematics, load_arm
+from services.kinematics.tool import tool_geometry
 from services.kinematics.trajectory import JointLimits, JointTrajectory, verify_trajectory
-from services.kinematics.urdf import tool_geometry
 from services.motion.service import MotionService
 
 pytestmark = pytest.mark.integration
