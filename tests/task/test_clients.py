@@ -17,8 +17,8 @@ from services.common.modes import MotionKind, TaskKind
 from services.common.settings import Settings
 from services.grasp.service import GraspPlannerServicer
 from services.kinematics.model import Kinematics, load_arm
+from services.kinematics.tool import tool_geometry
 from services.kinematics.trajectory import JointTrajectory
-from services.kinematics.urdf import tool_geometry
 from services.motion.service import MotionPlannerServicer
 from services.task.clients import GrpcGrasp, GrpcMotion
 from services.task.ports import Move, SeenBox, SeenRod
