@@ -84,6 +84,8 @@ def waypoint_to_proto(w: Waypoint) -> grasp_pb2.PickWaypoint:
                 overtravel_m=w.guard.overtravel_m,
                 speed_m_s=w.guard.speed_m_s,
                 direction=list(w.guard.direction),
+                slow_band_m=w.guard.slow_band_m,
+                approach_speed_m_s=w.guard.approach_speed_m_s,
             )
         )
     return msg

@@ -29,6 +29,9 @@ class Guard:
     overtravel_m: float
     speed_m_s: float
     direction: tuple[float, float, float] = (0.0, 0.0, -1.0)  # base frame
+    # two-stage: at approach_speed_m_s until slow_band_m above the nominal contact (0: slow all the way)
+    slow_band_m: float = 0.0
+    approach_speed_m_s: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -407,7 +407,13 @@ def _assemble(
 ) -> PickPlan:
     rc, g = cfg.rod, cfg.gripper
     ki, P = o.key_index, o.poses
-    guard = Guard(rc.touch_force_drop_n, rc.guard_overtravel_m, rc.guard_speed_m_s)
+    guard = Guard(
+        rc.touch_force_drop_n,
+        rc.guard_overtravel_m,
+        rc.guard_speed_m_s,
+        slow_band_m=rc.guard_slow_band_m,
+        approach_speed_m_s=rc.guard_approach_speed_m_s,
+    )
 
     def q(name: str) -> Array:
         return q_path[ki[name]].copy()

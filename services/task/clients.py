@@ -144,6 +144,8 @@ def _waypoints(plan: grasp_pb2.PickPlan) -> list[PlannedWaypoint]:
                 guard_force_n=w.guard.force_drop_n if guarded else 0.0,
                 guard_overtravel_m=w.guard.overtravel_m if guarded else 0.0,
                 guard_speed_m_s=w.guard.speed_m_s if guarded else 0.0,
+                guard_slow_band_m=w.guard.slow_band_m if guarded else 0.0,
+                guard_approach_speed_m_s=w.guard.approach_speed_m_s if guarded else 0.0,
                 guard_direction=np.array(w.guard.direction)
                 if guarded and len(w.guard.direction) == 3
                 else np.array([0.0, 0.0, -1.0]),

@@ -36,6 +36,7 @@ from services.common.errors import (
 from services.common.frames import matrix_to_quat_xyzw
 from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.kinematics.trajectory import JointTrajectory
+from services.task.pacing import paced_on_line
 from services.task.placement import free_place_xy, place_candidates
 from services.task.plan import state_for
 from services.task.ports import (
@@ -392,8 +393,19 @@ class Orchestrator:
         self, w: PlannedWaypoint, move: Move, traj: JointTrajectory, start: np.ndarray
     ) -> JointTrajectory:
         if w.guard_force_n > 0 and w.guard_speed_m_s > 0:
+            p0 = (await self.motion.tool_pose(start))[:3, 3]
+            if w.guard_slow_band_m > 0 and w.guard_approach_speed_m_s > w.guard_speed_m_s:
+                # two-stage: fast down to the band above the nominal contact, slow through it
+                along = np.asarray(w.guard_direction, dtype=float)
+                band_from = float(np.dot(w.T_base_tool[:3, 3] - p0, along)) - w.guard_slow_band_m
+                dist = [
+                    float(np.dot((await self.motion.tool_pose(q))[:3, 3] - p0, along)) for q in traj.positions
+                ]
+                return paced_on_line(
+                    traj, np.asarray(dist), w.guard_approach_speed_m_s, w.guard_speed_m_s, band_from
+                )
             # a guarded approach goes no faster than the grasp plan's touch-down speed
-            dist = float(np.linalg.norm(move.target[:3, 3] - (await self.motion.tool_pose(start))[:3, 3]))
+            dist = float(np.linalg.norm(move.target[:3, 3] - p0))
             needed = dist / w.guard_speed_m_s
             if traj.duration < needed:
                 traj = traj.scaled(needed / traj.duration)

@@ -72,6 +72,8 @@ class PlannedWaypoint:
     guard_overtravel_m: float = 0.0
     guard_direction: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, -1.0]))
     guard_speed_m_s: float = 0.0
+    guard_slow_band_m: float = 0.0  # two-stage touch-down: slow only this far above the nominal contact
+    guard_approach_speed_m_s: float = 0.0  # and this fast above it
     holding: bool = False
 
 

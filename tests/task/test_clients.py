@@ -115,7 +115,10 @@ async def test_one_waypoint_request_plans_each_move_as_its_own_request_would(
 async def test_a_move_carries_its_own_speed(
     channel: grpc.aio.Channel, settings: Settings, kin: Kinematics
 ) -> None:
-    motion = GrpcMotion(motion_pb2_grpc.MotionPlannerStub(channel), settings)
+    task = settings.task.model_copy(update={"guarded_speed_scale": 0.1})
+    motion = GrpcMotion(
+        motion_pb2_grpc.MotionPlannerStub(channel), settings.model_copy(update={"task": task})
+    )
     down = _lowered(kin.fk(Q_PICK), 0.05)
     normal, back, slow = await motion.plan_moves(
         Q_PICK,
@@ -127,7 +130,7 @@ async def test_a_move_carries_its_own_speed(
         (),
     )
     assert normal is not None and back is not None and slow is not None
-    # the same line, guarded: at task.guarded_speed_scale (0.1) of the limits (a short line is
+    # the same line, guarded: at task.guarded_speed_scale (here 0.1) of the limits (a short line is
     # acceleration-bound: √10 slower)
     assert slow.duration > 2 * normal.duration
 

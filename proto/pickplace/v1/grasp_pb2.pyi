@@ -81,16 +81,20 @@ class ComputeGraspsResponse(_message.Message):
     def __init__(self, grasps: _Optional[_Iterable[_Union[GraspCandidate, _Mapping]]] = ..., success: _Optional[bool] = ..., message: _Optional[str] = ..., candidates_generated: _Optional[int] = ..., rejected: _Optional[_Mapping[str, int]] = ...) -> None: ...
 
 class Guard(_message.Message):
-    __slots__ = ("force_drop_n", "overtravel_m", "speed_m_s", "direction")
+    __slots__ = ("force_drop_n", "overtravel_m", "speed_m_s", "direction", "slow_band_m", "approach_speed_m_s")
     FORCE_DROP_N_FIELD_NUMBER: _ClassVar[int]
     OVERTRAVEL_M_FIELD_NUMBER: _ClassVar[int]
     SPEED_M_S_FIELD_NUMBER: _ClassVar[int]
     DIRECTION_FIELD_NUMBER: _ClassVar[int]
+    SLOW_BAND_M_FIELD_NUMBER: _ClassVar[int]
+    APPROACH_SPEED_M_S_FIELD_NUMBER: _ClassVar[int]
     force_drop_n: float
     overtravel_m: float
     speed_m_s: float
     direction: _containers.RepeatedScalarFieldContainer[float]
-    def __init__(self, force_drop_n: _Optional[float] = ..., overtravel_m: _Optional[float] = ..., speed_m_s: _Optional[float] = ..., direction: _Optional[_Iterable[float]] = ...) -> None: ...
+    slow_band_m: float
+    approach_speed_m_s: float
+    def __init__(self, force_drop_n: _Optional[float] = ..., overtravel_m: _Optional[float] = ..., speed_m_s: _Optional[float] = ..., direction: _Optional[_Iterable[float]] = ..., slow_band_m: _Optional[float] = ..., approach_speed_m_s: _Optional[float] = ...) -> None: ...
 
 class PickWaypoint(_message.Message):
     __slots__ = ("name", "motion", "pose", "joints", "gripper", "guard", "holding")

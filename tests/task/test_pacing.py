@@ -1,0 +1,39 @@
+"""The two-stage pace of a guarded approach."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from services.kinematics.trajectory import JointTrajectory
+from services.task.pacing import paced_on_line
+
+
+def _line(n: int = 51, length: float = 0.05, duration: float = 0.5) -> tuple[JointTrajectory, np.ndarray]:
+    """A toy straight line whose first joint is the tool's distance (m), at uniform-ish speed."""
+    s = np.linspace(0.0, 1.0, n)
+    d = length * (3 * s**2 - 2 * s**3)  # rest to rest
+    q = np.zeros((n, 2))
+    q[:, 0], q[:, 1] = d, 2 * d
+    t = s * duration
+    qd = np.gradient(q, t, axis=0)
+    qd[0] = qd[-1] = 0.0
+    return JointTrajectory(("a", "b"), t, q, qd, np.gradient(qd, t, axis=0)), d
+
+
+def test_fast_above_the_band_slow_through_it_on_the_same_path() -> None:
+    traj, d = _line()
+    paced = paced_on_line(traj, d, approach_m_s=0.15, touch_m_s=0.025, band_from_m=0.03)
+    assert np.allclose(paced.positions, traj.positions)  # the path is the planned one
+    speed = np.abs(paced.velocities[:, 0])  # = tool speed on this toy line
+    band = d >= 0.03
+    assert np.max(speed[band]) <= 0.025 + 1e-9
+    assert np.max(speed[~band]) <= 0.15 + 1e-9 and np.max(speed[~band]) > 0.1
+    # faster than the whole line at the touch-down speed, slower than its planned timing
+    assert traj.duration < paced.duration < 0.05 / 0.025
+    assert np.all(paced.velocities[[0, -1]] == 0.0)
+
+
+def test_the_approach_is_no_faster_than_planned() -> None:
+    traj, d = _line(duration=2.0)  # planned peak 0.0375 m/s
+    paced = paced_on_line(traj, d, approach_m_s=0.15, touch_m_s=0.025, band_from_m=0.03)
+    assert np.max(np.abs(paced.velocities[:, 0])) <= 0.0375 + 1e-6
