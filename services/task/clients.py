@@ -251,8 +251,8 @@ class GrpcMotion:
                 wp.joints.extend(m.target.tolist())
             else:
                 wp.pose.CopyFrom(matrix_to_pose(m.target))
-            if m.held is not None:
-                wp.scene.CopyFrom(self._scene(obstacles, m.held, m.table_contact))
+            if m.held is not None or m.obstacles:
+                wp.scene.CopyFrom(self._scene(obstacles + m.obstacles, m.held, m.table_contact))
             opts = self._options(m.held, m.slow)
             if opts is not None:
                 wp.options.CopyFrom(opts)

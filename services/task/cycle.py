@@ -108,6 +108,11 @@ class PlannedPick:
         for i in range(self.rest_from, len(self.trajs)):
             self.trajs[i] = rest[i]
 
+    def plan_rest(self, first: int, planning: Awaitable[list[JointTrajectory | None]]) -> None:
+        """Plan the motions from waypoint ``first`` on in the background."""
+        self.cancel()
+        self.rest, self.rest_from = asyncio.ensure_future(planning), first
+
     def cancel(self) -> None:
         if self.rest is not None:
             self.rest.cancel()
@@ -238,7 +243,8 @@ class Orchestrator:
         while True:
             try:
                 await self._execute(planned, self._progress)
-                self._enter(CycleState.DONE, "returning to safe home")
+                if self.state is not CycleState.DONE:  # the plan's way home already entered it
+                    self._enter(CycleState.DONE, "returning to safe home")
                 await self._return_home(planned.plan, obs)
                 return True
             except SafetyError:
@@ -357,15 +363,20 @@ class Orchestrator:
         grasp_wp = next((w for w in plan.waypoints if w.gripper is GripperCommand.CLOSE), plan.waypoints[0])
         out.pick_pose = _pose_list(grasp_wp.T_base_tool)
         out.place_pose = [*map(float, plan.place_position), 0.0, 0.0, 0.0, 1.0]
-        # the arm sets off as soon as the moves to its first stop are planned; the rest plans meanwhile
+        plan = _with_way_home(plan)
+        # the arm sets off as soon as the moves to its first stop are planned; the rest up to the
+        # touch-down plans meanwhile (and what follows a touch-down plans from where it touched)
         n = len(plan.waypoints)
         first_stop = next((i for i in range(n) if _move(plan, i) is not None and not _blends(plan, i)), n - 1)
         trajs = await self._motions(plan, range(first_stop + 1), q, obstacles)
-        planned = PlannedPick(plan, trajs, obstacles, rest_from=first_stop + 1)
+        planned = PlannedPick(plan, trajs, obstacles, rest_from=n)
         if first_stop + 1 < n:
+            guarded = next(
+                (i for i in range(first_stop + 1, n) if plan.waypoints[i].guard_force_n > 0), n - 1
+            )
             q_stop = next((t.positions[-1] for t in reversed(trajs) if t is not None), q)
-            planned.rest = asyncio.ensure_future(
-                self._motions(plan, range(first_stop + 1, n), q_stop, obstacles)
+            planned.plan_rest(
+                first_stop + 1, self._motions(plan, range(first_stop + 1, guarded + 1), q_stop, obstacles)
             )
         return planned
 
@@ -419,7 +430,7 @@ class Orchestrator:
         q_known: np.ndarray | None = None  # where the last move ended (no round trip for the joints)
         in_motion = False  # the last trajectory ends in motion: this one continues it
         for i in range(resume.index, len(plan.waypoints)):
-            if i >= planned.rest_from:
+            if i >= planned.rest_from and _move(plan, i) is not None:
                 await planned.settle(cfg.deadlines.plan_s)
             w, traj = plan.waypoints[i], planned.trajs[i]
             self._progress = Progress(i, reached=i == resume.index and resume.reached)
@@ -461,9 +472,17 @@ class Orchestrator:
                     )
                     if w.guard_force_n > 0 and not res.stopped_early:
                         log.warning("%s: no touch-down detected within the overtravel", w.name)
+                    if w.guard_force_n > 0 and i + 1 < len(plan.waypoints):
+                        # what follows starts where the guard stopped: planned while the jaws act
+                        planned.plan_rest(
+                            i + 1,
+                            self._motions(
+                                plan, range(i + 1, len(plan.waypoints)), q_known, planned.obstacles
+                            ),
+                        )
             self._progress = Progress(i, reached=True)
-            if i + 1 == planned.rest_from:
-                await planned.settle(cfg.deadlines.plan_s)  # the whole way planned before the jaws close
+            if i + 1 == planned.rest_from and w.gripper is GripperCommand.CLOSE:
+                await planned.settle(cfg.deadlines.plan_s)  # the way on planned before the jaws close
             if w.gripper is not None and not (in_motion and w.gripper is GripperCommand.OPEN):
                 close = w.gripper is GripperCommand.CLOSE
                 g = await self._timed(
@@ -563,7 +582,9 @@ def _move(plan: GraspPlan, i: int) -> Move | None:
     if w.motion is MotionKind.HOLD:
         return None
     if w.motion is MotionKind.JOINT:
-        return Move(MotionKind.JOINT, w.joints, held, label=w.name)
+        # the way home passes what was placed: standing there now, it is an obstacle
+        placed = (_placed_box(plan),) if w.name == WAY_HOME else ()
+        return Move(MotionKind.JOINT, w.joints, held, label=w.name, obstacles=placed)
     guarded = w.guard_force_n > 0
     T = w.T_base_tool.copy()
     if guarded:  # a guarded approach may go as far as the overtravel; touch-down stops it earlier
@@ -625,6 +646,19 @@ class _RecordingRobot:
     async def gripper(self, close: bool) -> GripOutcome:
         self._out.gripper_actions += 1
         return await self._robot.gripper(close)
+
+
+WAY_HOME = "HOME"
+
+
+def _with_way_home(plan: GraspPlan) -> GraspPlan:
+    """The plan with the move back to its safe home as its last waypoint (planned and blended with
+    the retract like any other move), when it starts at one."""
+    first = plan.waypoints[0]
+    if first.name != "SAFE_HOME":
+        return plan
+    home = PlannedWaypoint(WAY_HOME, MotionKind.JOINT, first.T_base_tool.copy(), first.joints.copy())
+    return replace(plan, waypoints=[*plan.waypoints, home])
 
 
 PLACED_TOP_CLEARANCE_M = 0.03

@@ -118,6 +118,7 @@ class Move:
     table_contact: bool = False  # the held object may touch the table (lift-off, set-down)
     label: str = ""
     blend: bool = False  # the arm does not stop at this move's target: it flows into the next move
+    obstacles: tuple[SeenBox, ...] = ()  # in this move's scene besides the plan's (what was placed)
 
     def __post_init__(self) -> None:
         shape = {MotionKind.JOINT: (self.target.ndim == 1), MotionKind.LINEAR: (self.target.shape == (4, 4))}

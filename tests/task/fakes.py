@@ -231,6 +231,7 @@ class FakeRobot:
     clock_s: float = 0.0  # the controller's clock: advances by what the arm executes
     moves: int = 0
     continued: list[str] = field(default_factory=list)  # labels of the moves sent as continuing
+    reached: dict[str, np.ndarray] = field(default_factory=dict)  # where each labelled move left the arm
     safety_stopped: bool = False
     _holding_calls: int = 0
 
@@ -252,6 +253,7 @@ class FakeRobot:
         self.q = a + share * (b - a)
         self.clock_s += share * traj.duration
         self.commands.append(("move", traj.meta.get("label", ""), force_guard_n > 0))
+        self.reached[str(traj.meta.get("label", ""))] = self.q.copy()
         if continues:
             self.continued.append(str(traj.meta.get("label", "")))
         if fault is not None:

@@ -50,14 +50,17 @@ async def test_a_rod_cycle_runs_every_state_and_sends_the_plan_in_order() -> Non
     assert cell.wait.waits == []
 
 
-async def test_the_plan_is_two_motion_requests_with_each_moves_scene() -> None:
-    """One request to the first stop (the arm sets off with it), one for the rest from there."""
+async def test_the_plan_is_three_motion_requests_with_each_moves_scene() -> None:
+    """One request to the first stop (the arm sets off with it), one from there to the touch-down,
+    one from where it touched down to the safe home (the placed rod an obstacle on the way home)."""
     cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))))
     await cell.run()
-    first, rest = cell.motion.requests[:2]
+    assert len(cell.motion.requests) == 3
+    first, rest, after = cell.motion.requests
     # RELEASE does not move (a gripper action where the arm stands): it is not sent
     assert first.labels == ["SAFE_HOME", "PRE_GRASP", "GRASP"]
-    assert rest.labels == ["LIFT", "REORIENT", "PLACE", "RETRACT"]
+    assert rest.labels == ["LIFT", "REORIENT", "PLACE"]
+    assert after.labels == ["RETRACT", "HOME"]
     assert first.start == tuple(HOME)
     grasp = next(w for w in cell.grasp.plans[0].waypoints if w.name == "GRASP")
     assert np.allclose(rest.start, fake_joints_at(grasp.T_base_tool[:3, 3]))
@@ -75,9 +78,14 @@ async def test_the_plan_is_two_motion_requests_with_each_moves_scene() -> None:
     # the guarded approach aims past the nominal pose by the overtravel
     place = next(w for w in cell.grasp.plans[0].waypoints if w.name == "PLACE")
     assert by["PLACE"].target[2, 3] == pytest.approx(place.T_base_tool[2, 3] - 0.02)
-    # afterwards: RETRACT replanned from where PLACE touched down, then the way home
-    assert [r.labels for r in cell.motion.requests[2:]] == [["RETRACT"], ["HOME"]]
-    assert cell.motion.requests[2].start != tuple(by["PLACE"].target[:3, 3]) + (0.0, 0.0, 0.0)
+    # afterwards: from where PLACE touched down (a quarter short of its target), RETRACT and the way home
+    assert np.allclose(after.start, cell.robot.reached["PLACE"])
+    home = after.moves[1]
+    assert home.kind is MotionKind.JOINT and np.allclose(home.target, HOME)
+    (placed,) = home.obstacles
+    assert after.moves[0].obstacles == ()  # RETRACT leaves the rod from between the jaws
+    xy = cell.grasp.plans[0].place_position[:2]
+    assert np.all(placed.min[:2] < xy) and np.all(xy < placed.max[:2]) and placed.min[2] == 0.0
 
 
 async def test_the_arm_stops_only_where_physics_asks() -> None:
@@ -89,7 +97,8 @@ async def test_the_arm_stops_only_where_physics_asks() -> None:
     assert outcome.success
     by = {m.label: m for r in cell.motion.requests[:2] for m in r.moves}
     assert {n for n, m in by.items() if m.blend} == {"SAFE_HOME", "PRE_GRASP", "LIFT"}
-    assert cell.robot.continued == ["PRE_GRASP", "LIFT"]
+    assert [m.blend for m in cell.motion.requests[2].moves] == [True, False]  # RETRACT flows home
+    assert cell.robot.continued == ["PRE_GRASP", "LIFT", "RETRACT"]
     assert cell.robot.commands[:5] == [
         ("recover",),
         ("gripper", OPEN),  # before setting off: PRE_GRASP is passed in motion
