@@ -14,6 +14,7 @@ import contextlib
 import itertools
 import logging
 import time
+from collections.abc import Callable
 
 from rich.console import Console, Group
 from rich.live import Live
@@ -76,7 +77,21 @@ def _status_table(runner, started: float, last: PickOutcome | None) -> Group:  #
     return Group(*lines)
 
 
-async def run_pick_cell(settings: Settings, cycles: int, console: Console) -> TaskCounters:
+def cell_keeps_running(cycles: int, task_running: bool, cycles_done: int) -> bool:
+    """Whether ``pickplace up`` stays up. It lives until Ctrl-C or SIGTERM: a Stop, an e-stop from any
+    source or a failed task leave every service up (so Reset and Start, or a calibration, can follow).
+    Only a run asked for ``cycles`` (> 0) ends by itself, once the task has finished that many."""
+    return cycles <= 0 or task_running or cycles_done < cycles
+
+
+async def run_pick_cell(
+    settings: Settings,
+    cycles: int,
+    console: Console,
+    on_ready: Callable[[Cell, str], None] | None = None,
+    on_tick: Callable[[], None] | None = None,
+) -> TaskCounters:
+    """``on_ready(cell, dashboard_url)`` once everything serves; ``on_tick()`` after each display refresh."""
     started = time.perf_counter()
     last: list[PickOutcome] = []
     from gateway.server import embedded_gateway
@@ -99,11 +114,15 @@ async def run_pick_cell(settings: Settings, cycles: int, console: Console) -> Ta
         )
         console.print("Ctrl-C stops after a summary. Another terminal: [green]pickplace robot watch[/green]")
         runner.start(cycles=cycles)
+        if on_ready is not None:
+            on_ready(cell, url)
         try:
             with Live(_status_table(runner, started, None), console=console, refresh_per_second=4) as live:
-                while runner.running:
-                    await asyncio.sleep(0.25)
+                while cell_keeps_running(cycles, runner.running, len(runner.outcomes)):
+                    await asyncio.sleep(0.25)  # the display's refresh, not a wait for the arm
                     live.update(_status_table(runner, started, last[-1] if last else None))
+                    if on_tick is not None:
+                        on_tick()
                 live.update(_status_table(runner, started, last[-1] if last else None))
         finally:
             with contextlib.suppress(Exception):
