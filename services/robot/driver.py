@@ -77,6 +77,7 @@ class RobotDriver:
         # the last target of a trajectory that continues (streamed, not yet executed): the next
         # trajectory starts from it, not from the measured joints, which trail it while moving
         self._continue_from: np.ndarray | None = None
+        self._continue_id: int | None = None  # the queue ID of that target
 
     async def start(self) -> None:
         await self.client.connect()
@@ -122,10 +123,12 @@ class RobotDriver:
         await self.client.disable()
 
     async def clear_error(self) -> None:
+        self._continue_from = None
         await self.client.clear_error()
 
     async def recover(self) -> None:
         """Seed 001's recovery step: clear the error, re-enable, wait."""
+        self._continue_from = None
         await self.client.clear_error()
         await self.client.enable()
         if self.settings.robot.retry_wait_s > 0:
@@ -218,7 +221,8 @@ class RobotDriver:
         if not 0.004 <= period <= 1.0:
             raise InvalidInputError(f"servo period must be within 4 ms..1 s, got {period}")
         fb = self.feedback
-        following = self._continue_from is not None and fb.robot_mode == RobotMode.RUNNING
+        following = self._continue_from is not None and not fb.in_error and self._still_queued(fb)
+        # following: the previous trajectory's targets are still queued or running; start from its last
         q_now = self._continue_from if following and self._continue_from is not None else fb.q.copy()
         self._continue_from = None
         start_err = float(np.max(np.abs(traj.positions[0] - q_now)))
@@ -273,6 +277,7 @@ class RobotDriver:
                 await self.client.next_feedback()
             ids.append(await self.client.servo_j(q, period))
         if not wait_done:  # the next trajectory continues the queue: the last target is the result
+            self._continue_id = ids[-1]
             return MoveResult(targets[-1].copy(), loop.time() - t0, 1)
         fb = await self.client.wait_motion_done(
             ids[-1], max(self.settings.robot.motion_timeout_s, 2 * period)
@@ -308,6 +313,14 @@ class RobotDriver:
             if not stream.done():
                 stream.cancel()
             self.client.remove_listener(watch)
+
+    def _still_queued(self, fb: FeedbackState) -> bool:
+        """Whether the arm is still on its way to the last target of a continuing trajectory (not yet
+        started, running, or just arrived) — not halted elsewhere by a stop or an alarm."""
+        assert self._continue_from is not None
+        if self._continue_id is not None and fb.current_command_id < self._continue_id:
+            return fb.robot_mode in (RobotMode.RUNNING, RobotMode.ENABLE)
+        return float(np.max(np.abs(fb.q - self._continue_from))) <= START_TOLERANCE_RAD
 
     @staticmethod
     def _executed_index(ids: list[int | None], current_id: int) -> int:

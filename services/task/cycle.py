@@ -472,6 +472,8 @@ class Orchestrator:
                     )
                     if w.guard_force_n > 0 and not res.stopped_early:
                         log.warning("%s: no touch-down detected within the overtravel", w.name)
+                    if w.guard_force_n > 0:
+                        q_known = await self.robot.joints()  # where the arm came to rest after the stop
                     if w.guard_force_n > 0 and i + 1 < len(plan.waypoints):
                         # what follows starts where the guard stopped: planned while the jaws act
                         planned.plan_rest(
