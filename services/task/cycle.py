@@ -266,7 +266,7 @@ class Orchestrator:
                     self._enter(state_for(w.name), f"resuming at {w.name} after {type(exc).__name__}")
                     continue
                 if action is Action.REGRASP or (action is Action.NEXT_GRASP and self._progress.index > 0):
-                    await self._back_off_open()  # out of the grasp before looking again
+                    await self._back_off_open(planned)  # out of the grasp and the view before looking again
                 return False  # REGRASP / NEXT_GRASP: detect again and plan from where the arm is
 
     # ------------------------------------------------------------------ DETECT
@@ -557,15 +557,21 @@ class Orchestrator:
         return traj
 
     # ------------------------------------------------------------------ recovery helpers
-    async def _back_off_open(self) -> None:
-        """After a failed grasp: open and back away upward before looking again."""
+    async def _back_off_open(self, planned: PlannedPick) -> None:
+        """After a failed grasp: open, back away upward and go on to the safe home, out of the camera's
+        view of the table, before looking again (an arm over the table hides the rod it let go of)."""
         await self.robot.gripper(False)
         q = await self.robot.joints()
+        home = planned.plan.waypoints[0].joints if planned.plan.waypoints[0].name == "SAFE_HOME" else None
         try:
             up = _raised(await self.motion.tool_pose(q), 0.08)
-            traj = await self._plan_single(q, Move(MotionKind.LINEAR, up, label="BACK_OFF"), ())
-            if traj is not None:
-                await self.robot.execute(traj)
+            moves = [Move(MotionKind.LINEAR, up, label="BACK_OFF", blend=home is not None)]
+            if home is not None:
+                moves.append(Move(MotionKind.JOINT, home, label="SAFE_HOME"))
+            trajs = await self.motion.plan_moves(q, moves, planned.obstacles)
+            for k, traj in enumerate(trajs):
+                if traj is not None:
+                    await self.robot.execute(traj, continues=k + 1 < len(trajs) and _ends_in_motion(traj))
         except RobotError as exc:
             log.warning("could not back off after a failed grasp: %s", exc)
 

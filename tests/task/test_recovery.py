@@ -23,6 +23,7 @@ from services.task.recovery import Action, Attempts, RetryLimits, decide
 from services.task.states import CycleState
 from tests.task.fakes import (
     HELD_ROD,
+    HOME,
     FakeCell,
     FakeGrasp,
     FakeMotion,
@@ -200,11 +201,15 @@ async def test_a_slipped_grasp_backs_off_open_looks_again_and_regrasps() -> None
         ("recover",),
         ("gripper", OPEN),
         ("move", "BACK_OFF", False),
-        ("move", "SAFE_HOME", False),  # the second grasp, planned on a new detection from up here
-        ("move", "PRE_GRASP", False),
+        ("move", "SAFE_HOME", False),  # out of the camera's view before looking again
+        ("move", "PRE_GRASP", False),  # the second grasp, planned on a new detection from there
         ("gripper", OPEN),
     ]
-    assert cell.motion.labelled(["BACK_OFF"]).moves[0].target[2, 3] == pytest.approx(0.20 + 0.08)
+    back = cell.motion.labelled(["BACK_OFF", "SAFE_HOME"])
+    assert back.moves[0].target[2, 3] == pytest.approx(0.20 + 0.08) and np.allclose(
+        back.moves[1].target, HOME
+    )
+    assert cell.grasp.calls[1].q_now == tuple(HOME)  # the second plan starts at the safe home
     s = cell.states
     first_lift = s.index(CycleState.LIFT)
     assert s[first_lift + 1 : first_lift + 4] == [CycleState.DETECT, CycleState.PLAN, CycleState.APPROACH]
