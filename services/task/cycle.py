@@ -483,8 +483,6 @@ class Orchestrator:
                             ),
                         )
             self._progress = Progress(i, reached=True)
-            if i + 1 == planned.rest_from and w.gripper is GripperCommand.CLOSE:
-                await planned.settle(cfg.deadlines.plan_s)  # the way on planned before the jaws close
             if w.gripper is not None and not (in_motion and w.gripper is GripperCommand.OPEN):
                 close = w.gripper is GripperCommand.CLOSE
                 g = await self._timed(
