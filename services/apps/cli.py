@@ -195,6 +195,9 @@ def sim_dobot(
     if feedback_port is not None:
         sim["feedback_port"] = feedback_port
     s = _settings(profile, config, sim=sim)
+    from services.apps.probes import start_metrics_exporter
+
+    start_metrics_exporter(s)  # off unless metrics.port is set (compose / Kubernetes), as in `serve`
 
     async def main() -> None:
         async with build_sim_server(s) as server:
