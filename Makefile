@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 WEB_DEPS := web/node_modules/.package-lock.json
 
-.PHONY: install run test test-fast lint proto bench clean browser up up-local
+.PHONY: install run test test-fast lint proto bench clean browser up up-local compose-smoke
 
 install: $(STAMP) $(WEB_DEPS) browser
 
@@ -54,3 +54,9 @@ up:
 # The same topology as separate OS processes on loopback (no Docker); Ctrl-C stops them all.
 up-local: install
 	MUJOCO_GL=egl $(PY) -m services.apps.launcher up
+
+# docker-compose.yml in a real engine, end to end (root; 20-30 min; not part of `make test` or CI):
+# engine + Compose v2 installed when missing, stand-in base images when Docker Hub cannot be reached,
+# the stack in its own network namespace, health/status/picks/Prometheus/vision-crash checks, all torn down.
+compose-smoke:
+	$(PYTHON) deploy/compose-smoke/smoke.py
