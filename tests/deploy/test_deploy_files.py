@@ -412,3 +412,207 @@ def test_k8s_runs_the_same_image_commands_and_variables_as_compose():
 def test_dashboard_json_is_plain_json():
     for path in (REPO / "deploy" / "grafana" / "dashboards").glob("*.json"):
         json.loads(path.read_text())
+
+
+# ---------------------------------------------------------------------------- what a real engine found (issue 16)
+METRICS_DIR = "/tmp/pickplace-metrics"
+
+
+def image_uid() -> int:
+    m = re.search(r"useradd [^\n]*--uid (\d+)", (REPO / "deploy" / "docker" / "Dockerfile").read_text())
+    assert m, "the Dockerfile creates no user with a fixed uid"
+    return int(m.group(1))
+
+
+def k8s_containers() -> dict[str, dict[str, Any]]:
+    return {
+        c["name"]: c
+        for d in k8s_docs()
+        if d["kind"] in ("Deployment", "Job")
+        for c in d["spec"]["template"]["spec"]["containers"]
+    }
+
+
+def k8s_env(container: dict[str, Any]) -> dict[str, Any]:
+    return {e["name"]: e.get("value") for e in container.get("env", [])}
+
+
+def test_the_metrics_tmpfs_belongs_to_the_image_user():
+    uid = image_uid()
+    exporters = [n for n in PICKPLACE_SERVICES if "PICKPLACE_METRICS__PORT" in CSERVICES[n]["environment"]]
+    assert set(exporters) == set(DEFAULT_METRICS_PORTS)
+    for name in exporters:
+        mounts = [t for t in CSERVICES[name].get("tmpfs", []) if t.split(":", 1)[0] == METRICS_DIR]
+        assert len(mounts) == 1, (name, CSERVICES[name].get("tmpfs"))
+        opts = (
+            dict(o.split("=", 1) for o in mounts[0].split(":", 1)[1].split(",")) if ":" in mounts[0] else {}
+        )
+        # a tmpfs is root's, whatever its mode: the non-root service could not write counter_*.db
+        assert opts.get("uid") == str(uid) and opts.get("gid") == str(uid), (name, mounts[0])
+    for name, c in k8s_containers().items():
+        if name not in PICKPLACE_SERVICES:
+            continue
+        assert c["securityContext"]["runAsUser"] == uid, name
+        if name in exporters:
+            mounted = {m["mountPath"] for m in c.get("volumeMounts", [])}
+            assert METRICS_DIR in mounted, name  # an emptyDir is world-writable
+
+
+def test_the_multiprocess_dir_is_set_only_where_metrics_are_served_and_never_empty():
+    # prometheus_client switches to multi-process mode when the name exists at all, even empty
+    assert MULTIPROC_ENV not in COMPOSE["x-env"]
+    for name, svc in CSERVICES.items():
+        env = svc.get("environment", {})
+        if name in PICKPLACE_SERVICES:
+            assert (MULTIPROC_ENV in env) == ("PICKPLACE_METRICS__PORT" in env), name
+        if MULTIPROC_ENV in env:
+            assert env[MULTIPROC_ENV] == METRICS_DIR, (name, env[MULTIPROC_ENV])
+    assert MULTIPROC_ENV not in CSERVICES["gateway"]["environment"]
+    config = next(
+        d for d in k8s_docs() if d["kind"] == "ConfigMap" and d["metadata"]["name"] == "pickplace-env"
+    )
+    assert MULTIPROC_ENV not in config["data"]
+    for name, c in k8s_containers().items():
+        if name not in PICKPLACE_SERVICES:
+            continue
+        env = k8s_env(c)
+        assert (MULTIPROC_ENV in env) == ("PICKPLACE_METRICS__PORT" in env), name
+        if MULTIPROC_ENV in env:
+            assert env[MULTIPROC_ENV] == METRICS_DIR, (name, env[MULTIPROC_ENV])
+
+
+def starts_an_exporter(service: dict[str, Any]) -> bool:
+    """Does the command this container runs start the metrics exporter (``start_metrics_exporter``)?"""
+    import inspect
+
+    app, args = cli_for(service)
+    cmd, _params = click_resolve(app, args)
+    return "start_metrics_exporter(" in inspect.getsource(cmd.callback)
+
+
+def test_every_prometheus_target_has_an_exporter():
+    cfg = yaml.safe_load((REPO / "deploy" / "prometheus" / "prometheus.yml").read_text())
+    for job in cfg["scrape_configs"]:
+        for target in (t for sc in job["static_configs"] for t in sc["targets"]):
+            host, port = target.rsplit(":", 1)
+            # the containers in that host's network namespace, and which of them listens on the port
+            inside = [
+                n
+                for n in PICKPLACE_SERVICES
+                if n == host or CSERVICES[n].get("network_mode") == f"service:{host}"
+            ]
+            owners = [
+                n
+                for n in inside
+                if port
+                in (
+                    CSERVICES[n]["environment"].get("PICKPLACE_METRICS__PORT"),
+                    CSERVICES[n]["environment"].get("PICKPLACE_GATEWAY__PORT"),
+                )
+            ]
+            assert len(owners) == 1, f"{job['job_name']} scrapes {target}; listening there: {owners}"
+            owner = CSERVICES[owners[0]]
+            if owner["environment"].get("PICKPLACE_GATEWAY__PORT") != port:
+                assert starts_an_exporter(owner), f"{owners[0]} serves no metrics on {port}"
+    # the check can fail: a command that starts no exporter
+    assert not starts_an_exporter({"command": ["db", "upgrade"]})
+
+
+def test_cell_driver_probes_itself_and_the_image_bakes_in_no_probe():
+    from services.apps import launcher
+
+    dockerfile = (REPO / "deploy" / "docker" / "Dockerfile").read_text()
+    # an image-wide HEALTHCHECK is inherited by every service that sets none (the gateway's, on the driver)
+    assert not re.search(r"^HEALTHCHECK", dockerfile, re.M)
+    driver = CSERVICES["cell-driver"]["healthcheck"]
+    assert not driver.get("disable") and driver["test"][:4] == [
+        "CMD",
+        "python",
+        "-m",
+        "services.apps.launcher",
+    ]
+    _cmd, params = click_resolve(launcher.app, driver["test"][4:])
+    assert params["service"] == "task"  # what it drives, reached from its own container
+    k8s = k8s_containers()["cell-driver"]
+    assert k8s["readinessProbe"]["exec"]["command"] == driver["test"][1:]
+    for name in PICKPLACE_SERVICES:
+        if CSERVICES[name].get("restart") != "no":  # everything long-lived says when it is healthy
+            hc = CSERVICES[name].get("healthcheck", {})
+            assert hc.get("test") and not hc.get("disable"), name
+
+
+def test_the_image_builds_from_argument_bases_with_a_small_context():
+    dockerfile = (REPO / "deploy" / "docker" / "Dockerfile").read_text()
+    assert not re.search(
+        r"^# *syntax=", dockerfile, re.M
+    )  # BuildKit would fetch that frontend from Docker Hub
+    args = dict(re.findall(r"^ARG (\w+)=(\S+)$", dockerfile, re.M))
+    assert args == {"NODE_IMAGE": "node:20-bookworm-slim", "PYTHON_IMAGE": "python:3.11-slim-bookworm"}
+    stages = re.findall(r"^FROM (\S+) AS (\w+)$", dockerfile, re.M)
+    assert [base for base, _ in stages] == ["${NODE_IMAGE}", "${PYTHON_IMAGE}", "${PYTHON_IMAGE}"]
+    ignored = set((REPO / ".dockerignore").read_text().split())
+    assert {".venv", ".git", ".env", "node_modules", "var"} <= ignored
+    for copied in ("services", "gateway", "proto", "config", "web", "pyproject.toml", "README.md"):
+        assert copied not in ignored
+
+
+# ---------------------------------------------------------------------------- make compose-smoke
+def smoke_module() -> Any:
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "compose_smoke", REPO / "deploy" / "compose-smoke" / "smoke.py"
+    )
+    assert spec and spec.loader
+    module = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("compose_smoke", module)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_smoke_stand_ins_replace_only_third_party_images():
+    smoke = smoke_module()
+    override = yaml.safe_load((REPO / "deploy" / "compose-smoke" / "standins.yml").read_text())["services"]
+    assert set(override) <= set(CSERVICES) and not set(override) & set(PICKPLACE_SERVICES)
+    for name, svc in override.items():
+        assert set(svc) <= {"image", "profiles"}, name
+        assert CSERVICES[name]["image"] in smoke.HUB_IMAGES.values(), name
+    assert override["grafana"] == {"profiles": ["grafana"]}  # no Grafana here; the real file keeps it
+    for name in ("postgres", "prometheus", "zenoh"):
+        assert (REPO / "deploy" / "compose-smoke" / "standins" / f"{name}.Dockerfile").exists()
+
+
+def test_the_smoke_reads_the_debian_mirror_health_and_targets():
+    smoke = smoke_module()
+    deb822 = (
+        "Types: deb\nURIs: http://mirror.example/debian\nSuites: bookworm bookworm-updates\nComponents: main\n\n"
+        "Types: deb\nURIs: http://security.example/debian-security\nSuites: bookworm-security\n"
+    )
+    assert smoke.debian_mirror([deb822]) == "http://mirror.example/debian"
+    assert smoke.debian_mirror(["deb [arch=amd64] http://m.example/debian/ bookworm main"]) == (
+        "http://m.example/debian"
+    )
+    assert (
+        smoke.debian_mirror(["deb http://m.example/debian bullseye main"]) == "http://deb.debian.org/debian"
+    )
+    ps = smoke.compose_ps(
+        '{"Service":"vision","State":"running","Health":"healthy"}\n'
+        '{"Service":"db-migrate","State":"exited","Health":"","ExitCode":0}\n'
+        '{"Service":"task","State":"running","Health":"starting"}\n'
+    )
+    wrong = smoke.unhealthy(ps, {"vision", "db-migrate", "task", "gateway"}, one_shot={"db-migrate"})
+    assert wrong == ["gateway: no container", "task: running starting"]
+    targets = {
+        "data": {
+            "activeTargets": [
+                {"labels": {"job": "vision"}, "scrapeUrl": "http://vision:9104/metrics", "health": "up"},
+                {
+                    "labels": {"job": "sim-dobot"},
+                    "scrapeUrl": "http://sim-dobot:9100/metrics",
+                    "health": "down",
+                },
+            ]
+        }
+    }
+    n_up, down = smoke.targets_up(targets)
+    assert n_up == 1 and down and "sim-dobot" in down[0]
