@@ -30,6 +30,9 @@ COLORS_RGB: dict[str, tuple[int, int, int]] = {
     "green": (40, 170, 60),
     "blue": (35, 70, 200),
     "black": (28, 28, 30),
+    "yellow": (215, 190, 40),
+    "grey": (128, 128, 128),
+    "white": (235, 235, 232),
 }
 LIGHT_TABLE_RGB = (196, 186, 166)
 DARK_MAT_RGB = (52, 54, 58)
@@ -108,6 +111,13 @@ class NoiseModel:
     flying_pixel_prob: float = 0.5  # at depth edges
     rgb_sigma: float = 3.0
     rod_specular: float = 45.0  # peak added brightness of the highlight on the black metal
+    # A specular stripe along the tube as black metal under cell lights shows (the hard scene set):
+    # peak brightness (0 = none, 255 = saturated), its angular half-width on the tube, where it sits
+    # (degrees from the tube's camera-facing line) and how much it fades from one end to the other.
+    rod_stripe_value: float = 0.0
+    rod_stripe_halfwidth_deg: float = 12.0
+    rod_stripe_offset_deg: float = 0.0
+    rod_stripe_taper: float = 0.0
 
     @classmethod
     def off(cls) -> NoiseModel:
@@ -265,6 +275,7 @@ def render_scene(scene: SyntheticScene, noise: NoiseModel | None = None, seed: i
     table_depth = np.where(on_table, t_table, np.inf)
 
     visible_alone: dict[int, int] = {}
+    stripe = np.zeros((H, W))  # 0..1 weight of the specular stripe on rod pixels
     rod_ids = []
     objects: list[tuple[int, str, object]] = [
         (LABEL_FIRST_OBJECT + i, "rod", r) for i, r in enumerate(scene.rods)
@@ -298,6 +309,8 @@ def render_scene(scene: SyntheticScene, noise: NoiseModel | None = None, seed: i
         labels[rs, cs] = np.where(closer, obj_id, labels[rs, cs])
         albedo[rs, cs] = np.where(closer[..., None], np.asarray(colour, dtype=float), albedo[rs, cs])
         normals[rs, cs] = np.where(closer[..., None], n_local @ Rw.T, normals[rs, cs])
+        if isinstance(spec, RodSpec) and noise.rod_stripe_value > 0:
+            stripe[rs, cs] = np.where(closer, _stripe_weight(o_local, d_local, t, n_local, spec, noise), 0.0)
 
     visible = {k: float(np.count_nonzero(labels == k)) / v if v else 0.0 for k, v in visible_alone.items()}
 
@@ -312,6 +325,8 @@ def render_scene(scene: SyntheticScene, noise: NoiseModel | None = None, seed: i
         half_vec /= np.linalg.norm(half_vec, axis=-1, keepdims=True)
         spec_term = np.clip(np.sum(normals * half_vec, axis=-1), 0.0, 1.0) ** 40
         rgb += (noise.rod_specular * spec_term * is_rod)[..., None]
+    if noise.rod_stripe_value > 0:
+        rgb += (noise.rod_stripe_value - rgb) * stripe[..., None]
     if noise.enabled and noise.rgb_sigma > 0:
         rgb += rng.normal(0.0, noise.rgb_sigma, rgb.shape)
     color = np.clip(np.rint(rgb), 0, 255).astype(np.uint8)
@@ -326,6 +341,22 @@ def render_scene(scene: SyntheticScene, noise: NoiseModel | None = None, seed: i
     return RenderedScene(
         frame=frame, scene=scene, labels=labels, depth_true_m=depth_true, visible_fraction=visible
     )
+
+
+def _stripe_weight(o: Array, d: Array, t: Array, n: Array, rod: RodSpec, noise: NoiseModel) -> Array:
+    """Stripe weight of rod pixels (rod frame: axis = x): a Gaussian in the angle about the axis,
+    centred ``rod_stripe_offset_deg`` from the line facing the camera, fading along the axis."""
+    facing = np.arctan2(o[1], o[2])  # angle about x of the camera seen from the axis
+    centre = facing + np.deg2rad(noise.rod_stripe_offset_deg)
+    phi = np.arctan2(n[..., 1], n[..., 2])
+    dphi = np.angle(np.exp(1j * (phi - centre)))
+    w = np.exp(-0.5 * (dphi / np.deg2rad(noise.rod_stripe_halfwidth_deg)) ** 2)
+    with np.errstate(invalid="ignore"):
+        x = o[0] + np.where(np.isfinite(t), t, 0.0) * d[..., 0]
+    along = np.clip(x / rod.length_m + 0.5, 0.0, 1.0)
+    w = w * (1.0 - noise.rod_stripe_taper * along)
+    side = np.abs(n[..., 0]) < 0.5  # the caps carry no stripe
+    return np.where(np.isfinite(t) & side, w, 0.0)
 
 
 def _smooth_field(rng: np.random.Generator, shape: tuple[int, int], cell_px: int) -> Array:
