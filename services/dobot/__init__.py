@@ -50,6 +50,7 @@ from services.dobot.feedback import (
     FeedbackFramer,
     decode_feedback,
     encode_feedback,
+    feedback_fault,
     is_packet_start,
     new_feedback,
 )
@@ -96,6 +97,7 @@ __all__ = [
     "emergency_stop",
     "enable_robot",
     "encode_feedback",
+    "feedback_fault",
     "fmt_float",
     "fmt_int",
     "fmt_point",

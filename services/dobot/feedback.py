@@ -165,3 +165,50 @@ class FeedbackFramer:
             self.skipped_bytes += idx
             del self._buf[:idx]
         return out
+
+
+# Plausibility bounds of a packet's values (beyond them a packet is corrupt, whatever the arm): no
+# Dobot joint turns past ±360°, none moves at 1000 °/s, no TCP leaves a 5 m sphere, no wrist sensor
+# reads 100 kN. Generous on purpose: they catch garbage and NaN, not a limit violation.
+MAX_JOINT_DEG = 400.0
+MAX_JOINT_SPEED_DEG_S = 1000.0
+MAX_TCP_MM = 5000.0
+MAX_FORCE = 1.0e5
+# A clock that jumps forward more than this between two packets of one connection is garbage (the
+# controller stamps every 8 ms; a reconnect starts a new baseline).
+MAX_CLOCK_JUMP_MS = 3_600_000
+_JOINT_FIELDS = ("QActual", "QTarget")
+_VALID_MODES = frozenset(range(0, 12))  # 0: some firmware before INIT; beyond 11: none
+
+
+def feedback_fault(rec: np.ndarray, prev_stamp_ms: int | None) -> str | None:
+    """Why a decoded packet cannot be trusted (non-finite or implausible values the driver uses, a
+    controller clock that runs backwards or leaps), or None when it is sound. Pure."""
+    for name in _JOINT_FIELDS:
+        v = np.asarray(rec[name], dtype=float)
+        if not np.all(np.isfinite(v)):
+            return f"{name} not finite"
+        if np.any(np.abs(v) > MAX_JOINT_DEG):
+            return f"{name} beyond ±{MAX_JOINT_DEG:.0f}°"
+    qd = np.asarray(rec["QDActual"], dtype=float)
+    if not np.all(np.isfinite(qd)):
+        return "QDActual not finite"
+    if np.any(np.abs(qd) > MAX_JOINT_SPEED_DEG_S):
+        return f"QDActual beyond {MAX_JOINT_SPEED_DEG_S:.0f}°/s"
+    tool = np.asarray(rec["ToolVectorActual"], dtype=float)
+    if not np.all(np.isfinite(tool)):
+        return "ToolVectorActual not finite"
+    if np.any(np.abs(tool[:3]) > MAX_TCP_MM) or np.any(np.abs(tool[3:]) > MAX_JOINT_DEG):
+        return "ToolVectorActual implausible"
+    force = np.asarray(rec["ActualTCPForce"], dtype=float)
+    if not np.all(np.isfinite(force)) or np.any(np.abs(force) > MAX_FORCE):
+        return "ActualTCPForce not finite or implausible"
+    if int(rec["RobotMode"]) not in _VALID_MODES:
+        return f"RobotMode {int(rec['RobotMode'])} unknown"
+    stamp = int(rec["TimeStamp"])
+    if prev_stamp_ms is not None:
+        if stamp < prev_stamp_ms:
+            return f"controller clock ran backwards ({prev_stamp_ms} → {stamp} ms)"
+        if stamp - prev_stamp_ms > MAX_CLOCK_JUMP_MS:
+            return f"controller clock leapt {stamp - prev_stamp_ms} ms"
+    return None

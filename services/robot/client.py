@@ -4,11 +4,19 @@
 - Dashboard (29999): requests may be in flight together; replies are matched to
   requests by their echo, so a late reply after a timeout never shifts the
   others. Every request has a timeout.
+- Dashboard replies are matched strictly, by echo and in order: a request that times out leaves a
+  tombstone, so its late reply is discarded and never handed to a later command.
 - Feedback (30004): a background reader frames the 1440-byte packets
-  (resynchronising after garbage) and keeps the newest decoded state; waiters
-  are woken per packet; listeners get every packet.
-- Connection loss fails pending requests at once; the next request reconnects
-  with capped, jittered backoff and a bounded number of attempts.
+  (resynchronising after garbage), drops and counts every packet whose values are not finite or
+  plausible or whose clock runs backwards (:func:`dobot.feedback_fault`), and keeps the newest sound
+  state; waiters are woken per packet; listeners get every sound packet. A run of bad packets is a
+  link fault. No NaN state ever leaves this module.
+- The link always comes back: the feedback reader reconnects forever (capped, jittered backoff) while
+  the client lives, and :attr:`DobotClient.link` says whether it is up, down or reconnecting. A loss
+  fails every feedback waiter with RobotCommunicationError; a loss while the arm moves also owes the
+  controller a Stop, sent the moment the dashboard is reachable and before any motion command is let
+  through again; the cut motion is never resent. Requests reconnect the dashboard with a bounded
+  number of attempts, so a request fails in bounded time.
 - Motion completion is awaited from the feedback stream (CurrentCommandId and
   RobotMode) with a deadline — never a sleep loop. Every deadline about the arm is
   on the controller's clock (the packets' TimeStamp), with a generous wall-clock
@@ -25,7 +33,9 @@ import contextlib
 import enum
 import logging
 import random
+import re
 import time
+from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -55,6 +65,39 @@ def _deg(v_rad: np.ndarray) -> list[float]:
 def _pose(T: np.ndarray) -> list[float]:
     """A transform → the controller's pose (mm, degrees), as plain floats."""
     return transform_to_dobot_pose(T).tolist()
+
+
+class LinkState(enum.Enum):
+    """The controller link as the feedback stream sees it (health reports anything but UP as down)."""
+
+    DOWN = "down"  # not yet connected, or closed
+    UP = "up"  # sound packets arriving
+    RECONNECTING = "reconnecting"  # lost; retrying for as long as the client lives
+
+
+class LinkEventKind(enum.Enum):
+    LOST = "lost"
+    RESTORED = "restored"
+    STOP_SENT = "stop sent"
+
+
+@dataclass(frozen=True)
+class LinkEvent:
+    """One change of the link, stamped on the controller's clock: a loss with the last sound packet's
+    stamp before it, a restore with the first one after it, a Stop with the newest stamp when the
+    controller accepted it."""
+
+    kind: LinkEventKind
+    epoch: int  # the link epoch after the event (each loss starts a new one)
+    stamp_ms: int | None
+    reason: str
+
+
+# A run of this many bad packets (8 ms each: 200 ms) is a link fault, not noise.
+BAD_FEEDBACK_RUN = 25
+# A request that timed out leaves a tombstone for its late reply; beyond this many the oldest go.
+MAX_TOMBSTONES = 64
+LINK_EVENTS_KEPT = 256
 
 
 class ClientState(enum.Enum):
@@ -87,7 +130,14 @@ class FeedbackState:
     received_ns: int  # local time.time_ns() at receipt
 
     @classmethod
-    def from_record(cls, rec: np.ndarray, received_ns: int) -> FeedbackState:
+    def from_record(
+        cls, rec: np.ndarray, received_ns: int, prev_stamp_ms: int | None = None
+    ) -> FeedbackState:
+        """The state of one packet; ProtocolError when a value the driver uses is not finite or not
+        plausible, or the controller clock ran backwards from ``prev_stamp_ms``."""
+        fault = dobot.feedback_fault(rec, prev_stamp_ms)
+        if fault is not None:
+            raise dobot.ProtocolError(f"bad feedback packet: {fault}")
         return cls(
             q=np.deg2rad(np.array(rec["QActual"], dtype=float)),
             qd=np.deg2rad(np.array(rec["QDActual"], dtype=float)),
@@ -112,10 +162,39 @@ class FeedbackState:
         return self.robot_mode in (RobotMode.ERROR, RobotMode.COLLISION)
 
 
+def _num_key(token: str) -> str:
+    try:
+        return repr(round(float(token), 6))
+    except ValueError:
+        return token.lower()
+
+
+def echo_key(text: str) -> str:
+    """A command's identity as its echo shows it: case, spaces and number formats do not matter
+    (``MovJ(joint={1,2.50})`` == ``movj(joint = {1.000, 2.5})``), every value does."""
+    compact = text.replace(" ", "").replace("\t", "")
+    return "".join(_num_key(tok) for tok in _ECHO_TOKENS.split(compact))
+
+
+_ECHO_TOKENS = re.compile(r"([(){}\[\],=])")
+
+
 @dataclass
 class _Pending:
     command: str
     future: asyncio.Future[dobot.Reply]
+    key: str = ""
+    abandoned: bool = False  # timed out or cancelled: its reply, when it comes, is discarded
+
+
+class _Wake:
+    """What feedback waiters wait on: set by the next sound packet, or by a link loss (``error``)."""
+
+    __slots__ = ("error", "event")
+
+    def __init__(self) -> None:
+        self.event = asyncio.Event()
+        self.error: RobotCommunicationError | None = None
 
 
 class _ControllerDeadline(Exception):
@@ -150,7 +229,10 @@ class DobotClient:
         connect_timeout_s: float = 2.0,
         feedback_timeout_s: float = 1.0,
         reconnect: ReconnectSettings | None = None,
+        bad_feedback_run: int = BAD_FEEDBACK_RUN,
     ):
+        if bad_feedback_run < 1:
+            raise ValueError("bad_feedback_run must be at least 1")
         self.host = host
         self.dashboard_port = dashboard_port
         self.feedback_port = feedback_port
@@ -158,19 +240,34 @@ class DobotClient:
         self.connect_timeout_s = connect_timeout_s
         self.feedback_timeout_s = feedback_timeout_s
         self.reconnect = reconnect or ReconnectSettings()
+        self.bad_feedback_run = bad_feedback_run
         self.state = ClientState.IDLE
+        self.link = LinkState.DOWN
+        self.link_epoch = 0  # +1 at every loss of either socket
+        self.link_events: deque[LinkEvent] = deque(maxlen=LINK_EVENTS_KEPT)
         self._reader: asyncio.StreamReader | None = None
         self._writer: asyncio.StreamWriter | None = None
         self._rx_task: asyncio.Task[None] | None = None
         self._fb_task: asyncio.Task[None] | None = None
+        self._stop_task: asyncio.Task[None] | None = None
         self._pending: list[_Pending] = []
         self._connect_lock = asyncio.Lock()
         self._feedback: FeedbackState | None = None
-        self._fb_event = asyncio.Event()
-        self._fb_error: RobotCommunicationError | None = None
+        self._wake = _Wake()
         self._listeners: list[Callable[[FeedbackState], None]] = []
-        self.packets_received = 0
+        # motion bookkeeping for a loss: the newest queue ID accepted, the newest one a loss cut off,
+        # and whether the controller is owed a Stop (motion commands are refused until it is sent)
+        self._last_queued_id: int | None = None
+        self._cut_upto_id = 0
+        self.stop_owed = False
+        self.packets_received = 0  # sound packets
         self.framer_resyncs = 0
+        self.feedback_rejected = 0  # packets dropped as not finite / implausible / clock backwards
+        self.feedback_rejections: Counter[str] = Counter()  # by reason
+        self.link_faults = 0  # runs of bad packets that cut the link
+        self.feedback_connect_failures = 0
+        self.late_replies_discarded = 0  # replies to requests that had timed out
+        self.unmatched_replies = 0  # replies whose echo matched no request
 
     # ------------------------------------------------------------------ lifecycle
     async def __aenter__(self) -> DobotClient:
@@ -181,30 +278,44 @@ class DobotClient:
         await self.close()
 
     async def connect(self) -> None:
+        """Open the dashboard (bounded attempts) and the feedback stream, and wait for its first sound
+        packet. The feedback reader then keeps the link up for as long as the client lives."""
         if self.state is ClientState.CLOSED:
             raise RuntimeError("client is closed")
         await self._ensure_dashboard()
-        if self._fb_task is None:
-            await self._wait_first_feedback()
+        if self._fb_task is None or self._fb_task.done():
+            self._fb_task = asyncio.create_task(self._feedback_loop(), name=f"dobot-feedback-{self.host}")
+        if self.link is not LinkState.UP:
+            await self._wait_link_up(self.connect_timeout_s + self.feedback_timeout_s)
 
-    async def _wait_first_feedback(self) -> None:
-        self._fb_error = None
-        self._fb_task = asyncio.create_task(self._feedback_loop(), name=f"dobot-feedback-{self.host}")
-        await self.wait_feedback(lambda fb: True, self.connect_timeout_s + self.feedback_timeout_s)
+    async def _wait_link_up(self, timeout_s: float) -> None:
+        try:
+            async with asyncio.timeout(timeout_s):
+                while self.link is not LinkState.UP:
+                    with contextlib.suppress(RobotCommunicationError):
+                        await self.next_feedback(timeout_s)
+        except TimeoutError:
+            raise RobotCommunicationError(
+                f"no sound feedback from {self.host}:{self.feedback_port} within {timeout_s:.2f}s"
+            ) from None
 
     async def close(self) -> None:
         self.state = ClientState.CLOSED
-        for task in (self._rx_task, self._fb_task):
+        self.link = LinkState.DOWN
+        for task in (self._rx_task, self._fb_task, self._stop_task):
             if task is not None:
                 task.cancel()
                 with contextlib.suppress(asyncio.CancelledError, Exception):
                     await task
-        self._rx_task = self._fb_task = None
+        self._rx_task = self._fb_task = self._stop_task = None
         self._drop_dashboard(RobotCommunicationError("client closed"))
+        self._fail_waiters(RobotCommunicationError("client closed"))
 
-    async def _open(self, port: int) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
+    async def _open(
+        self, port: int, attempts: int | None = None
+    ) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
         last: Exception | None = None
-        attempts = self.reconnect.max_attempts
+        attempts = self.reconnect.max_attempts if attempts is None else attempts
         for attempt in range(attempts):
             if self.state is ClientState.CLOSED:
                 raise RobotCommunicationError("client closed")
@@ -229,7 +340,7 @@ class DobotClient:
             f"cannot reach the robot controller at {self.host}:{port} after {attempts} attempts: {last}"
         )
 
-    async def _ensure_dashboard(self) -> None:
+    async def _ensure_dashboard(self, attempts: int | None = None) -> None:
         if self._writer is not None and not self._writer.is_closing():
             return
         async with self._connect_lock:
@@ -237,9 +348,10 @@ class DobotClient:
                 return
             self.state = ClientState.CONNECTING
             try:
-                self._reader, self._writer = await self._open(self.dashboard_port)
+                self._reader, self._writer = await self._open(self.dashboard_port, attempts)
             except RobotCommunicationError:
-                self.state = ClientState.DISCONNECTED
+                if self.state is not ClientState.CLOSED:
+                    self.state = ClientState.DISCONNECTED
                 raise
             self._rx_task = asyncio.create_task(
                 self._dashboard_loop(self._reader), name=f"dobot-dashboard-{self.host}"
@@ -276,9 +388,14 @@ class DobotClient:
             reason = f"connection error: {exc}"
         if self._reader is reader:
             log.warning("Dobot dashboard %s:%d lost: %s", self.host, self.dashboard_port, reason)
+            self._link_lost(f"dashboard connection lost ({reason})")
             self._drop_dashboard(RobotCommunicationError(f"dashboard connection lost ({reason})"))
 
     def _dispatch_reply(self, item: dobot.Reply | dobot.Unparseable) -> None:
+        """Replies come in the order the commands went out: each belongs to the oldest request whose
+        echo it carries. Requests before that one got no reply and never will (failed: the stream is
+        resynchronised); a reply to an abandoned (timed-out) request is discarded; a reply matching no
+        request is discarded. A reply is never handed to a command it does not echo."""
         if isinstance(item, dobot.Unparseable):
             log.warning("unparseable reply from controller (%s): %r", item.reason, item.text)
             if self._pending:
@@ -290,70 +407,165 @@ class DobotClient:
                         )
                     )
             return
-        echo = item.echo.replace(" ", "")
+        key = echo_key(item.echo)
         for i, p in enumerate(self._pending):
-            if p.command.replace(" ", "") == echo:
-                del self._pending[i]
-                if not p.future.done():
-                    p.future.set_result(item)
-                return
-        # A firmware that echoes differently (case, number formats): fall back to FIFO by name.
-        for i, p in enumerate(self._pending):
-            if p.command.split("(", 1)[0].lower() == item.command_name.lower():
-                del self._pending[i]
-                if not p.future.done():
-                    p.future.set_result(item)
-                return
-        # a request cancelled or timed out before its reply came (e.g. a guarded move stopping)
-        log.debug("reply matched no pending request: %r", item.raw)
+            if p.key != key:
+                continue
+            skipped, self._pending = self._pending[:i], self._pending[i + 1 :]
+            for s in skipped:
+                if not s.future.done():
+                    s.future.set_exception(
+                        RobotCommunicationError(
+                            f"no reply to {s.command!r}: the controller answered a later command "
+                            f"({item.echo!r}) first; stream resynchronised"
+                        )
+                    )
+            if p.abandoned or p.future.done():
+                self.late_replies_discarded += 1
+                log.info("discarded the late reply to a timed-out request: %r", item.raw)
+            else:
+                p.future.set_result(item)
+            return
+        self.unmatched_replies += 1
+        log.warning("reply matched no request, discarded: %r", item.raw)
+
+    # ------------------------------------------------------------------ link
+    def _motion_in_progress(self) -> bool:
+        """Whether the arm may be moving on our commands: a queue command awaiting its reply, the
+        controller running, or a queue ID accepted that the feedback has not shown finished."""
+        if any(p.key.split("(", 1)[0] in dobot.QUEUE_COMMANDS and not p.abandoned for p in self._pending):
+            return True
+        fb = self._feedback
+        if fb is not None and fb.robot_mode in (RobotMode.RUNNING, RobotMode.PAUSE):
+            return True
+        last = self._last_queued_id
+        return last is not None and (fb is None or fb.current_command_id < last)
+
+    def _fail_waiters(self, error: RobotCommunicationError) -> None:
+        wake, self._wake = self._wake, _Wake()
+        wake.error = error
+        wake.event.set()
+
+    def _link_lost(self, reason: str) -> None:
+        """Either socket is gone (or the feedback turned bad): a new epoch, every waiter failed, and
+        when the arm may be moving, a Stop owed before any motion command is let through."""
+        if self.state is ClientState.CLOSED:
+            return
+        self.link_epoch += 1
+        stamp = None if self._feedback is None else self._feedback.timestamp_ms
+        self.link_events.append(LinkEvent(LinkEventKind.LOST, self.link_epoch, stamp, reason))
+        if self._motion_in_progress():
+            self.stop_owed = True
+            self._cut_upto_id = max(self._cut_upto_id, self._last_queued_id or 0)
+            if self._stop_task is None or self._stop_task.done():
+                self._stop_task = asyncio.create_task(self._deliver_stop(), name=f"dobot-stop-{self.host}")
+        self._fail_waiters(RobotCommunicationError(f"robot link lost: {reason}"))
+
+    async def _deliver_stop(self) -> None:
+        """Send the owed Stop as soon as the dashboard answers: one connect attempt at a time, capped
+        jittered backoff between them, for as long as the client lives."""
+        attempt = 0
+        while self.stop_owed and self.state is not ClientState.CLOSED:
+            try:
+                await self._ensure_dashboard(attempts=1)
+                reply = await self.raw_request("Stop()")
+            except RobotCommunicationError as exc:
+                delay = _backoff(min(attempt, 16), self.reconnect)
+                attempt += 1
+                log.debug("owed Stop not delivered yet (%s); retry in %.2fs", exc, delay)
+                await asyncio.sleep(delay)
+                continue
+            if reply.error_id != 0:  # e.g. e-stop active: the arm is halted anyway
+                log.warning("Stop after a link loss answered ErrorID %d", reply.error_id)
+            self.stop_owed = False
+            self._last_queued_id = None
+            stamp = None if self._feedback is None else self._feedback.timestamp_ms
+            self.link_events.append(
+                LinkEvent(LinkEventKind.STOP_SENT, self.link_epoch, stamp, "motion cut by a link loss")
+            )
+            log.warning("sent Stop to %s after a link loss during motion", self.host)
 
     # ------------------------------------------------------------------ feedback
     async def _feedback_loop(self) -> None:
+        """Connect, read, and on any loss reconnect — forever, with capped jittered backoff."""
         attempt = 0
         while self.state is not ClientState.CLOSED:
             try:
-                reader, writer = await self._open(self.feedback_port)
-            except RobotCommunicationError as exc:
-                self._fb_error = exc
-                self._fb_event.set()
-                self._fb_event = asyncio.Event()
-                return
-            attempt = 0
-            framer = dobot.FeedbackFramer()
-            try:
-                while True:
-                    async with asyncio.timeout(max(self.feedback_timeout_s, 0.05) * 5):
-                        data = await reader.read(65536)
-                    if not data:
-                        raise ConnectionError("feedback connection closed by the controller")
-                    now = time.time_ns()
-                    records = framer.feed(data)
-                    self.framer_resyncs = framer.resyncs
-                    if records:
-                        # several packets in one read: every listener sees each, waiters the newest
-                        for rec in records:
-                            fb = FeedbackState.from_record(rec, now)
-                            self.packets_received += 1
-                            for cb in list(self._listeners):
-                                try:
-                                    cb(fb)
-                                except Exception:
-                                    log.exception("feedback listener failed")
-                        self._feedback = fb
-                        ev, self._fb_event = self._fb_event, asyncio.Event()
-                        ev.set()
-            except asyncio.CancelledError:
-                with contextlib.suppress(Exception):
-                    writer.close()
-                raise
-            except (OSError, TimeoutError, ConnectionError) as exc:
-                with contextlib.suppress(Exception):
-                    writer.close()
-                log.warning(
-                    "Dobot feedback %s:%d lost (%s); reconnecting", self.host, self.feedback_port, exc
-                )
+                async with asyncio.timeout(self.connect_timeout_s):
+                    reader, writer = await asyncio.open_connection(self.host, self.feedback_port)
+            except (OSError, TimeoutError) as exc:
+                self.feedback_connect_failures += 1
+                delay = _backoff(min(attempt, 16), self.reconnect)
+                if attempt % 10 == 0:
+                    log.warning(
+                        "Dobot feedback %s:%d unreachable (%s); retrying every ≤%.1fs",
+                        self.host,
+                        self.feedback_port,
+                        exc,
+                        self.reconnect.max_delay_s,
+                    )
                 attempt += 1
-                await asyncio.sleep(_backoff(attempt, self.reconnect))
+                await asyncio.sleep(delay)
+                continue
+            attempt = 0
+            try:
+                reason = await self._read_feedback(reader)
+            finally:
+                with contextlib.suppress(Exception):
+                    writer.close()
+            log.warning("Dobot feedback %s:%d lost (%s); reconnecting", self.host, self.feedback_port, reason)
+            if self.link is LinkState.UP:
+                self.link = LinkState.RECONNECTING
+                self._link_lost(f"feedback {reason}")
+            await asyncio.sleep(_backoff(0, self.reconnect))
+
+    async def _read_feedback(self, reader: asyncio.StreamReader) -> str:
+        """Read one connection until it fails; returns why it ended."""
+        framer = dobot.FeedbackFramer()
+        prev_stamp: int | None = None
+        bad_run = 0
+        try:
+            while True:
+                async with asyncio.timeout(max(self.feedback_timeout_s, 0.05) * 5):
+                    data = await reader.read(65536)
+                if not data:
+                    return "connection closed by the controller"
+                now = time.time_ns()
+                records = framer.feed(data)
+                self.framer_resyncs = framer.resyncs
+                fb: FeedbackState | None = None
+                # several packets in one read: every listener sees each, waiters the newest
+                for rec in records:
+                    try:
+                        state = FeedbackState.from_record(rec, now, prev_stamp)
+                    except dobot.ProtocolError as exc:
+                        self.feedback_rejected += 1
+                        self.feedback_rejections[str(exc).split(": ", 1)[-1].split(" (")[0]] += 1
+                        bad_run += 1
+                        if bad_run >= self.bad_feedback_run:
+                            self.link_faults += 1
+                            return f"fault: {bad_run} bad packets in a row (last: {exc})"
+                        continue
+                    bad_run = 0
+                    prev_stamp = state.timestamp_ms
+                    fb = state
+                    self.packets_received += 1
+                    if self.link is not LinkState.UP:
+                        self.link = LinkState.UP
+                        self.link_events.append(
+                            LinkEvent(LinkEventKind.RESTORED, self.link_epoch, state.timestamp_ms, "")
+                        )
+                    for cb in list(self._listeners):
+                        try:
+                            cb(state)
+                        except Exception:  # a listener's bug must not stop the feedback
+                            log.exception("feedback listener failed")
+                if fb is not None:
+                    self._feedback = fb
+                    wake, self._wake = self._wake, _Wake()
+                    wake.event.set()
+        except (OSError, TimeoutError, ConnectionError) as exc:
+            return f"connection error: {exc!r}"
 
     @property
     def feedback(self) -> FeedbackState | None:
@@ -367,22 +579,26 @@ class DobotClient:
             self._listeners.remove(callback)
 
     async def next_feedback(self, timeout_s: float | None = None) -> FeedbackState:
-        """Wait for the next packet (RobotCommunicationError when none arrives in time)."""
+        """Wait for the next sound packet. RobotCommunicationError when none arrives in time, or at
+        once when the link is lost while waiting."""
         timeout_s = self.feedback_timeout_s if timeout_s is None else timeout_s
-        if self._fb_error is not None:
-            raise self._fb_error
-        ev = self._fb_event
+        wake = self._wake
         try:
             async with asyncio.timeout(timeout_s):
-                await ev.wait()
+                await wake.event.wait()
         except TimeoutError:
             raise RobotCommunicationError(
-                f"no feedback from {self.host}:{self.feedback_port} for {timeout_s:.2f}s"
+                f"no feedback from {self.host}:{self.feedback_port} for {timeout_s:.2f}s "
+                f"(link {self.link.value})"
             ) from None
-        if self._fb_error is not None:
-            raise self._fb_error
+        if wake.error is not None:
+            raise wake.error
         assert self._feedback is not None
         return self._feedback
+
+    def _check_epoch(self, epoch: int, what: str) -> None:
+        if self.link_epoch != epoch:
+            raise RobotCommunicationError(f"robot link lost during {what}")
 
     async def wait_feedback(
         self, predicate: Callable[[FeedbackState], bool], timeout_s: float
@@ -406,6 +622,7 @@ class DobotClient:
         TimeoutError when a packet stamped past the deadline still fails ``predicate``;
         RobotCommunicationError when the stream goes silent, or when its clock does not reach the
         deadline within ``wall_guard_s`` of wall time (a frozen controller, not a slow one)."""
+        epoch = self.link_epoch
         fb = self._feedback if self._feedback is not None else await self.next_feedback()
         start_ms = fb.timestamp_ms if since_ms is None else since_ms
         deadline_ms = start_ms + controller_timeout_s * 1000.0
@@ -416,6 +633,7 @@ class DobotClient:
                     if fb.timestamp_ms >= deadline_ms:
                         raise _ControllerDeadline
                     fb = await self.next_feedback(self.feedback_timeout_s)
+                    self._check_epoch(epoch, "a controller-clock wait")
         except _ControllerDeadline:
             raise TimeoutError(
                 f"feedback condition not met within {controller_timeout_s:.2f}s of controller time"
@@ -439,27 +657,54 @@ class DobotClient:
 
     # ------------------------------------------------------------------ requests
     async def raw_request(self, command: str, timeout_s: float | None = None) -> dobot.Reply:
-        """Send one command; return its reply whatever the ErrorID."""
+        """Send one command; return its reply whatever the ErrorID.
+
+        A queue (motion) command is refused while a Stop is owed after a link loss, and fails when the
+        link is lost between sending it and its reply: it may have been cut by that Stop, and it is
+        never resent."""
+        key = echo_key(command)
+        queued = key.split("(", 1)[0] in dobot.QUEUE_COMMANDS
+        if queued and self.stop_owed:
+            raise RobotCommunicationError(
+                f"{command!r} refused: the robot link was lost during motion and the Stop it owes the "
+                "controller is not yet delivered"
+            )
         await self._ensure_dashboard()
         assert self._writer is not None
+        epoch = self.link_epoch
         fut: asyncio.Future[dobot.Reply] = asyncio.get_running_loop().create_future()
-        pending = _Pending(command, fut)
+        pending = _Pending(command, fut, key)
         self._pending.append(pending)
+        timeout = self.request_timeout_s if timeout_s is None else timeout_s
         try:
             self._writer.write(command.encode())
-            async with asyncio.timeout(self.request_timeout_s if timeout_s is None else timeout_s):
-                return await fut
+            async with asyncio.timeout(timeout):
+                reply = await fut
         except TimeoutError:
             raise RobotCommunicationError(
-                f"no reply to {command!r} from {self.host}:{self.dashboard_port} within "
-                f"{self.request_timeout_s if timeout_s is None else timeout_s:.2f}s"
+                f"no reply to {command!r} from {self.host}:{self.dashboard_port} within {timeout:.2f}s"
             ) from None
         except OSError as exc:
+            self._link_lost(f"dashboard send failed: {exc}")
             self._drop_dashboard(RobotCommunicationError(f"send failed: {exc}"))
             raise RobotCommunicationError(f"sending {command!r} failed: {exc}") from exc
         finally:
-            with contextlib.suppress(ValueError):
-                self._pending.remove(pending)
+            if not fut.done():
+                # timed out or cancelled: the controller may still answer; a tombstone takes that reply
+                pending.abandoned = True
+                fut.cancel()
+                tombstones = [p for p in self._pending if p.abandoned]
+                for old in tombstones[: max(0, len(tombstones) - MAX_TOMBSTONES)]:
+                    self._pending.remove(old)
+        if queued and reply.error_id == 0:
+            rid = reply.result_id
+            if epoch != self.link_epoch:
+                if rid is not None:
+                    self._cut_upto_id = max(self._cut_upto_id, rid)
+                raise RobotCommunicationError(f"the robot link was lost while {command!r} was being accepted")
+            if rid is not None:
+                self._last_queued_id = rid if self._last_queued_id is None else max(self._last_queued_id, rid)
+        return reply
 
     async def request(self, command: str, timeout_s: float | None = None) -> dobot.Reply:
         """Send one command; raise ControllerError (or EmergencyStopError) unless ErrorID is 0."""
@@ -598,6 +843,11 @@ class DobotClient:
         TrajectoryExecutionError when the deadline passes on the controller's clock, and
         RobotCommunicationError when that clock stalls (see :meth:`wait_controller`).
         """
+        if result_id is not None and result_id <= self._cut_upto_id:
+            raise RobotCommunicationError(
+                f"motion {result_id} was cut by a robot link loss (the controller was sent Stop)"
+            )
+        epoch = self.link_epoch
         fb = self._feedback if self._feedback is not None else await self.next_feedback()
         deadline_ms = fb.timestamp_ms + timeout_s * 1000.0
         seen_running = False
@@ -605,6 +855,7 @@ class DobotClient:
             async with asyncio.timeout(_wall_guard_s(timeout_s)):
                 while True:
                     fb = await self.next_feedback(self.feedback_timeout_s)
+                    self._check_epoch(epoch, f"motion {result_id}")
                     if fb.estop:
                         raise EmergencyStopError("emergency stop is active; motion aborted")
                     if fb.in_error:

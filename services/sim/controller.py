@@ -33,6 +33,7 @@ log = logging.getLogger("pickplace.sim.controller")
 
 MAX_TCP_SPEED_MM_S = 1000.0
 MAX_TCP_ACC_MM_S2 = 4000.0
+COMMAND_LOG_KEPT = 1024
 
 
 @dataclass
@@ -108,6 +109,8 @@ class SimController:
         # so every stamp agrees with the ticks that produced it whatever the machine's load or speed.
         self.boot_ms = clock_ms()
         self.commands_handled = 0
+        # (controller clock ms, command text) of the newest commands: what arrived when, for tests
+        self.command_log: collections.deque[tuple[int, str]] = collections.deque(maxlen=COMMAND_LOG_KEPT)
         self._feedback = dobot.new_feedback()
         self._refresh_feedback()
 
@@ -258,6 +261,7 @@ class SimController:
         """Answer one command (the text without surrounding whitespace)."""
         self.commands_handled += 1
         echo = text.strip()
+        self.command_log.append((self.clock_ms, echo))
         try:
             cmd = dobot.parse_command(echo)
         except dobot.ProtocolError:

@@ -165,6 +165,27 @@ class SimDobotServer(ServiceShell):
         self._servers.clear()
         self._loop = None
 
+    async def cut_link(self) -> None:
+        """Fault injection: the network to the controller is gone (listeners closed, clients dropped)
+        while the controller and its clock run on — the arm keeps executing what it was given."""
+        for srv in self._servers.values():
+            srv.close()
+        self.drop_clients()
+        for srv in self._servers.values():
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(srv.wait_closed(), 2.0)
+
+    async def restore_link(self) -> None:
+        """Fault injection: listen again on the same ports after :meth:`cut_link`."""
+        handlers: dict[str, Callable[[asyncio.StreamReader, asyncio.StreamWriter], Awaitable[None]]] = {
+            "dashboard": self._serve_dashboard,
+            "feedback": self._make_feed_handler(self._fast),
+            "slow": self._make_feed_handler(self._slow),
+        }
+        for name, port in self.ports.items():
+            if not self._servers[name].is_serving():
+                self._servers[name] = await asyncio.start_server(handlers[name], self.host, port)
+
     def drop_clients(self) -> None:
         """Close every client connection (as if the cable were pulled); listeners stay up."""
         for group in (self._fast, self._slow, self._dash):

@@ -53,3 +53,42 @@ def test_decode_rejects_bad_packet():
         dobot.decode_feedback(bytes(bad))
     with pytest.raises(dobot.ProtocolError):
         dobot.decode_feedback(b"\x00" * 10)
+
+
+def _rec(**fields: object) -> np.ndarray:
+    rec = dobot.decode_feedback(_packet())
+    rec = rec.copy()
+    rec["TimeStamp"] = 1_000
+    for k, v in fields.items():
+        rec[k] = v
+    return rec
+
+
+def test_sound_packet_has_no_fault():
+    assert dobot.feedback_fault(_rec(), None) is None
+    assert dobot.feedback_fault(_rec(), 992) is None
+    assert dobot.feedback_fault(_rec(), 1_000) is None  # a repeated stamp is still monotonic
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "why"),
+    [
+        ("QActual", [np.nan, 0, 0, 0, 0, 0], "QActual not finite"),
+        ("QTarget", [0, 0, np.inf, 0, 0, 0], "QTarget not finite"),
+        ("QActual", [0, 0, 0, 0, 0, 1e6], "QActual beyond"),
+        ("QDActual", [0, np.nan, 0, 0, 0, 0], "QDActual not finite"),
+        ("QDActual", [0, 5000, 0, 0, 0, 0], "QDActual beyond"),
+        ("ToolVectorActual", [np.nan, 0, 0, 0, 0, 0], "ToolVectorActual not finite"),
+        ("ToolVectorActual", [1e9, 0, 0, 0, 0, 0], "ToolVectorActual implausible"),
+        ("ActualTCPForce", [0, 0, np.nan, 0, 0, 0], "ActualTCPForce"),
+        ("RobotMode", 77, "RobotMode 77 unknown"),
+    ],
+)
+def test_non_finite_or_implausible_values_are_faults(field, value, why):
+    fault = dobot.feedback_fault(_rec(**{field: value}), None)
+    assert fault is not None and why in fault
+
+
+def test_controller_clock_must_not_run_backwards_or_leap():
+    assert "backwards" in str(dobot.feedback_fault(_rec(), 1_008))
+    assert "leapt" in str(dobot.feedback_fault(_rec(TimeStamp=2**62), 1_000))

@@ -1,6 +1,7 @@
 """DobotClient ↔ simulated Dobot over real loopback sockets."""
 
 import asyncio
+import contextlib
 import itertools
 import statistics
 
@@ -10,7 +11,7 @@ import pytest
 from services.common.errors import ControllerError, EmergencyStopError, RobotCommunicationError
 from services.common.settings import ReconnectSettings
 from services.dobot import RobotMode
-from services.robot.client import ClientState, DobotClient
+from services.robot.client import ClientState, DobotClient, LinkEventKind, LinkState
 from tests.conftest import HOME
 
 pytestmark = pytest.mark.integration
@@ -77,23 +78,30 @@ async def test_estop_during_motion(sim_server):
         assert await c.robot_mode() == RobotMode.ENABLE
 
 
-async def test_socket_closed_mid_move_reconnects(sim_server):
+async def test_socket_closed_mid_move_stops_the_arm_and_fails_the_motion(sim_server):
     async with make_client(sim_server) as c:
         await c.enable()
         rid = await c.mov_j(np.deg2rad([60, 0, 90, 0, -90, 0]), v=30)
-        sim_server.drop_clients()  # cable pulled: both sockets die
-        # a request already in flight on the dead socket fails (it may or may not have been
-        # executed, so it is not silently retried); the next one reconnects by itself
-        modes = []
-        for _ in range(2):
-            try:
-                modes.append(await c.robot_mode())
-                break
-            except RobotCommunicationError as exc:
-                assert "connection lost" in str(exc)
-        assert modes and modes[0] in (RobotMode.RUNNING, RobotMode.ENABLE)
-        fb = await c.wait_motion_done(rid, 10.0)
-        assert np.isclose(np.rad2deg(fb.q[0]), 60.0, atol=1e-6)
+        await c.wait_feedback(lambda fb: fb.robot_mode == RobotMode.RUNNING, 2.0)
+        sim_server.drop_clients()  # cable pulled: both sockets die, the listeners stay
+        # the cut motion fails (it is never resent); the client owes the controller a Stop and sends it
+        # once the link is back, before any motion command is let through
+        with pytest.raises(RobotCommunicationError):
+            await c.wait_motion_done(rid, 10.0)
+        while c.stop_owed:
+            with contextlib.suppress(RobotCommunicationError):
+                await c.next_feedback()
+        kinds = [e.kind for e in c.link_events]
+        assert LinkEventKind.STOP_SENT in kinds[kinds.index(LinkEventKind.LOST) :]
+        assert await c.robot_mode() == RobotMode.ENABLE
+        q = (await c.next_feedback()).q
+        assert np.rad2deg(q[0]) < 59.0  # stopped short of the target
+        later = await c.wait_controller_time(0.2)
+        assert np.allclose(later.q, q, atol=1e-9)
+        # the link is usable again
+        rid2 = await c.mov_j(np.deg2rad([0, 0, 90, 0, -90, 0]), v=100)
+        fb = await c.wait_motion_done(rid2, 10.0)
+        assert fb.current_command_id == rid2 and c.link is LinkState.UP
 
 
 async def test_pending_request_fails_when_connection_drops():
