@@ -50,6 +50,12 @@ class ControllerConfig:
     max_joint_acc_deg_s2: float = 720.0
     error_id_shape: str = "v46"  # GetErrorID reply shape: "v46" ([ids]) or "v45" ([[c],[s1]..[s6]])
     robot_type: int = 103
+    # ServoJ feed watchdog: a stream whose newest ServoJ arrived more than its ``t`` plus this margin
+    # ago (sim time) is halted with its look-ahead dropped, as if the host had died. None = off: the
+    # controller then ends a starved stream only when its queue runs dry (each ServoJ holds its target
+    # once its t has run out), which is how a host that stops feeding at a trajectory's end must be
+    # served unless it keeps feeding its final target until the arm is there.
+    servo_watchdog_margin_s: float | None = None
 
 
 @dataclass
@@ -99,6 +105,8 @@ class SimController:
         self.current_cmd_id = 0
         self.motion: _Motion | None = None
         self.sim_time = 0.0
+        self._servo_fed: tuple[float, float] | None = None  # (sim time of the newest ServoJ, its t)
+        self.servo_watchdog_trips = 0
         q = np.zeros(spec.dof) if q0 is None else np.asarray(q0, dtype=float)
         self.q_ref = q.copy()
         self.qd_ref = np.zeros(spec.dof)
@@ -155,6 +163,7 @@ class SimController:
     def tick(self, dt: float) -> None:
         """Advance sim time by dt: queue, reference, engine, alarms, feedback record."""
         self.sim_time += dt
+        self._servo_watchdog()
         if self.enabled and not self.alarms and not self.paused:
             remaining = dt
             while remaining > 0:
@@ -182,6 +191,34 @@ class SimController:
         self.measured = self.engine.step(dt, self.q_ref, self.qd_ref, self.qdd_ref)
         self._check_measured()
         self._refresh_feedback()
+
+    def servo_fed(self, t_s: float) -> None:
+        """A ServoJ arrived (its ``t``): the stream is fed until ``t`` plus the margin from now."""
+        self._servo_fed = (self.sim_time, t_s)
+
+    def _servo_stream_active(self) -> bool:
+        running = self.motion is not None and self.motion.cmd.key == "servoj"
+        return running or any(c.key == "servoj" for c in self.queue)
+
+    def _servo_watchdog(self) -> None:
+        margin = self.config.servo_watchdog_margin_s
+        if self._servo_fed is None:
+            return
+        if not self._servo_stream_active():
+            self._servo_fed = None  # the stream ended (ran dry, or was stopped)
+            return
+        fed_at, t_s = self._servo_fed
+        if margin is not None and self.sim_time - fed_at > t_s + margin:
+            self.servo_watchdog_trips += 1
+            log.warning(
+                "ServoJ stream not fed for %.3fs (t=%.3fs + %.3fs margin): halted, %d queued targets dropped",
+                self.sim_time - fed_at,
+                t_s,
+                margin,
+                len(self.queue),
+            )
+            self._servo_fed = None
+            self.halt()
 
     def _start_next(self) -> bool:
         if not self.queue:

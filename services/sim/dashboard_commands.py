@@ -221,7 +221,9 @@ def _h_servoj(ctl: SimController, cmd: dobot.ParsedCommand) -> list[object]:
             raise CommandError(dobot.ErrorID.ALARM)
         return LinearInTime(ctl.q_ref, q_goal, t)
 
-    return ctl.enqueue("servoj", run, cmd.raw)
+    ids = ctl.enqueue("servoj", run, cmd.raw)
+    ctl.servo_fed(t)
+    return ids
 
 
 def _h_rel_joint(ctl: SimController, cmd: dobot.ParsedCommand) -> list[object]:

@@ -304,3 +304,34 @@ async def test_link_comes_back_after_an_outage_and_stops_the_cut_motion(sim_serv
     rid2 = await c.mov_j(np.deg2rad([0, 0, 90, 0, -90, 0]), v=100)
     done = await c.wait_motion_done(rid2, 60.0)
     assert done.current_command_id == rid2
+
+
+async def test_a_host_that_stops_feeding_servoj_is_halted_by_the_controller_watchdog():
+    from services.kinematics.robot_models import NOVA5
+    from services.sim.controller import ControllerConfig, SimController
+    from services.sim.dobot_server import SimDobotServer
+    from services.sim.engine import KinematicEngine
+    from tests.conftest import HOME
+
+    ctl = SimController(NOVA5, KinematicEngine(), ControllerConfig(servo_watchdog_margin_s=0.016), q0=HOME)
+    sim = SimDobotServer(ctl, "127.0.0.1", 0, 0, None)
+    async with sim:
+        host = DobotClient(
+            "127.0.0.1", sim.ports["dashboard"], sim.ports["feedback"], reconnect=FAST_RECONNECT
+        )
+        watcher = DobotClient(
+            "127.0.0.1", sim.ports["dashboard"], sim.ports["feedback"], reconnect=FAST_RECONNECT
+        )
+        async with watcher:
+            await host.connect()
+            await host.enable()
+            # pipelined, as a look-ahead goes out: the 8 commands reach the controller together
+            targets = [HOME + np.deg2rad([0.5 * k, 0, 0, 0, 0, 0]) for k in range(1, 9)]
+            ids = await asyncio.gather(*(host.servo_j(q, 0.05) for q in targets))
+            await host.close()  # the host dies with 8 targets (0.4 s) queued
+            fb = await watcher.wait_feedback(lambda f: f.robot_mode == RobotMode.ENABLE, 5.0)
+            assert ctl.servo_watchdog_trips >= 1
+            assert ids[-1] is not None and fb.current_command_id < ids[-1]
+            assert np.rad2deg(fb.q[0] - HOME[0]) < 4.0 - 0.5  # halted short of the last target
+            later = await watcher.wait_controller_time(0.3)
+            assert np.array_equal(later.q, fb.q)

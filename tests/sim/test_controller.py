@@ -7,7 +7,7 @@ from services import dobot
 from services.common.frames import dobot_pose_to_transform
 from services.kinematics import analytic
 from services.kinematics.robot_models import NOVA5
-from services.sim.controller import SimController
+from services.sim.controller import ControllerConfig, SimController
 from services.sim.engine import KinematicEngine
 
 HOME = np.deg2rad([0, 0, 90, 0, -90, 0])
@@ -193,3 +193,81 @@ def test_collision_from_engine_raises_117():
     c.tick(0.008)
     assert c.mode == dobot.RobotMode.COLLISION
     assert dobot.parse_error_ids(dobot.parse_reply(c.handle("GetErrorID()")).values_text) == [117]
+
+
+def _servo_stream(c: SimController, start_deg: float, n: int, step_deg: float, t: float) -> list[int]:
+    """Queue ``n`` ServoJ targets at once (a host's look-ahead), J1 advancing ``step_deg`` each."""
+    ids = []
+    for k in range(1, n + 1):
+        r = reply(c, f"ServoJ({start_deg + k * step_deg:.6f},0,90,0,-90,0,t={t})")
+        assert r.ok
+        ids.append(r.result_id)
+    return ids
+
+
+def _ticks_until_rest(c: SimController, limit_s: float, dt: float = 0.008) -> float:
+    """Tick until the arm is at rest with nothing queued; the sim time that took."""
+    t0 = c.sim_time
+    while c.sim_time - t0 < limit_s:
+        c.tick(dt)
+        if c.mode == dobot.RobotMode.ENABLE and not np.any(c.measured.qd):
+            return c.sim_time - t0
+    raise AssertionError(f"still moving after {limit_s}s of sim time")
+
+
+def test_a_starved_servoj_stream_holds_its_last_target_once_its_t_runs_out(ctrl):
+    # today's (and a real controller's) behaviour without the watchdog: each ServoJ reaches its target
+    # in exactly t and holds it; a stream that is not fed ends when its queue runs dry
+    ids = _servo_stream(ctrl, 0.0, 10, 0.5, 0.032)
+    took = _ticks_until_rest(ctrl, 2.0)
+    assert took <= 10 * 0.032 + 2 * 0.008  # the whole look-ahead ran, then the arm stopped
+    assert ctrl.current_cmd_id == ids[-1] and ctrl.servo_watchdog_trips == 0
+    assert np.isclose(np.rad2deg(ctrl.measured.q[0]), 5.0, atol=1e-6)
+    q = ctrl.measured.q.copy()
+    run(ctrl, 0.5)
+    assert np.array_equal(ctrl.measured.q, q)
+
+
+def test_servoj_watchdog_stops_a_stream_not_fed_within_t_plus_margin():
+    c = SimController(
+        NOVA5,
+        KinematicEngine(),
+        ControllerConfig(servo_watchdog_margin_s=0.016),
+        q0=HOME,
+        clock_ms=lambda: 1_700_000_000_000,
+    )
+    assert reply(c, "EnableRobot()").ok
+    t = 0.032
+    # a host feeding one target per t, keeping a look-ahead of 4: never trips
+    _servo_stream(c, 0.0, 4, 0.5, t)
+    deg = 2.0
+    for _ in range(20):
+        run(c, t)
+        deg += 0.5
+        assert reply(c, f"ServoJ({deg:.6f},0,90,0,-90,0,t={t})").ok
+    assert c.servo_watchdog_trips == 0 and c.mode == dobot.RobotMode.RUNNING
+    # the host dies with 4 targets (0.128 s of motion) queued: the arm is halted t + margin later
+    fed_at = c.sim_time
+    took = _ticks_until_rest(c, 2.0)
+    assert c.servo_watchdog_trips == 1
+    assert c.sim_time - fed_at <= t + 0.016 + 0.008 + 1e-9
+    assert took < 4 * t  # not the whole look-ahead
+    assert np.rad2deg(c.measured.q[0]) < deg - 0.5  # short of the last target sent
+    q = c.measured.q.copy()
+    run(c, 0.5)
+    assert np.array_equal(c.measured.q, q) and not c.queue
+    # no alarm: a new stream runs
+    assert c.mode == dobot.RobotMode.ENABLE
+    _servo_stream(c, float(np.rad2deg(q[0])), 1, 0.5, t)
+    _ticks_until_rest(c, 1.0)
+    assert c.servo_watchdog_trips == 1
+
+
+def test_servoj_watchdog_leaves_other_motion_alone():
+    c = SimController(NOVA5, KinematicEngine(), ControllerConfig(servo_watchdog_margin_s=0.016), q0=HOME)
+    assert reply(c, "EnableRobot()").ok
+    _servo_stream(c, 0.0, 1, 0.5, 0.032)
+    _ticks_until_rest(c, 1.0)  # a stream that ended within its t is over: nothing to watch
+    assert reply(c, "MovJ(joint={30,0,90,0,-90,0})").ok
+    _ticks_until_rest(c, 10.0)
+    assert c.servo_watchdog_trips == 0 and np.isclose(np.rad2deg(c.measured.q[0]), 30.0, atol=1e-6)
