@@ -258,7 +258,13 @@ def _assemble(
         - 1
     )
     i_place = n_above + n_low + 1
-    guard = Guard(cc.touch_force_drop_n, cc.guard_overtravel_m + cc.place_clearance_m, cc.guard_speed_m_s)
+    guard = Guard(
+        cc.touch_force_drop_n,
+        cc.guard_overtravel_m + cc.place_clearance_m,
+        cc.guard_speed_m_s,
+        slow_band_m=cc.guard_slow_band_m,
+        approach_speed_m_s=cc.guard_approach_speed_m_s,
+    )
     T_home = fk(spec, home) @ T_flange_tool
     wps = (
         Waypoint("SAFE_HOME", T_home, MotionKind.JOINT, home.copy()),

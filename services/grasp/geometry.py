@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy.spatial.transform import Rotation, Slerp
 
 from services.common.errors import InvalidInputError
 from services.common.frames import finite_vector
@@ -82,23 +83,17 @@ def rotation_z(angle: float) -> Array:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
+# trace(R) within this of -1 (a turn within ~1.8° of a half turn): scipy's slerp decides the way round
+HALF_TURN_MARGIN = 1e-3
+
+
 def _rotation_log(R: Array) -> tuple[Array, float]:
-    """Unit axis and angle in [0, π] of a rotation matrix (the shortest rotation, as a slerp takes)."""
+    """Unit axis and angle in [0, π) of a rotation matrix (the shortest rotation, as a slerp takes)."""
     angle = math.acos(max(-1.0, min(1.0, (float(np.trace(R)) - 1.0) / 2.0)))
-    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
     if angle < 1e-9:
         return np.array([0.0, 0.0, 1.0]), 0.0
-    if math.pi - angle > 1e-4:
-        return w / (2.0 * math.sin(angle)), angle
-    # near a half turn the skew part vanishes: the axis from the symmetric part, signed by the skew part
-    axis = np.sqrt(np.clip((np.diag(R) + 1.0) / 2.0, 0.0, None))
-    k = int(np.argmax(axis))
-    for j in range(3):
-        if j != k:
-            axis[j] = math.copysign(axis[j], R[k, j] + R[j, k])
-    if w[k] < 0:
-        axis = -axis
-    return axis / np.linalg.norm(axis), angle
+    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    return w / (2.0 * math.sin(angle)), angle
 
 
 def _rotations_about(axis: Array, angles: Array) -> Array:
@@ -116,8 +111,13 @@ def pose_path(T_a: Array, T_b: Array, step_m: float, n: int | None = None) -> Ar
     s = np.linspace(0.0, 1.0, n + 1)
     out = np.repeat(T_a[None], n + 1, axis=0)
     out[:, :3, 3] = T_a[:3, 3] + s[:, None] * (T_b[:3, 3] - T_a[:3, 3])
-    # slerp in closed form (scipy's Slerp costs ~0.4 ms a call, and a rod plan makes hundreds)
-    axis, angle = _rotation_log(T_a[:3, :3].T @ T_b[:3, :3])
-    out[:, :3, :3] = T_a[:3, :3][None] @ _rotations_about(axis, s * angle)
-    out[-1, :3, :3] = T_b[:3, :3]
+    R_rel = T_a[:3, :3].T @ T_b[:3, :3]
+    if float(np.trace(R_rel)) > -1.0 + HALF_TURN_MARGIN:
+        # slerp in closed form (scipy's Slerp costs ~0.4 ms a call, and a rod plan makes hundreds)
+        axis, angle = _rotation_log(R_rel)
+        out[:, :3, :3] = T_a[:3, :3][None] @ _rotations_about(axis, s * angle)
+        out[-1, :3, :3] = T_b[:3, :3]
+    else:  # about a half turn the way round is ambiguous: scipy's choice, as everywhere else
+        rots = Rotation.from_matrix(np.stack([T_a[:3, :3], T_b[:3, :3]]))
+        out[:, :3, :3] = Slerp([0.0, 1.0], rots)(s).as_matrix()
     return out

@@ -111,6 +111,10 @@ class CubeSortSettings(Model):
     place_approach_m: float = Field(0.05, gt=0, le=0.3)
     guard_overtravel_m: float = Field(0.005, ge=0, le=0.05)
     guard_speed_m_s: float = Field(0.03, gt=0, le=0.2)
+    guard_slow_band_m: float = Field(
+        0.012, ge=0, le=0.3, description="slow (guard_speed_m_s) only this far above the release pose"
+    )
+    guard_approach_speed_m_s: float = Field(0.15, ge=0, le=0.5, description="tool speed above the slow band")
     touch_force_drop_n: float = Field(0.4, gt=0, le=50)
     retract_up_m: float = Field(0.10, ge=0, le=0.5)
     max_approach_tilt_deg: float = Field(10.0, ge=0, le=90, description="cube grasps: near top-down only")
