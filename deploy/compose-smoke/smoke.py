@@ -605,8 +605,20 @@ def teardown(
             shutil.rmtree(path, ignore_errors=True)
         else:
             path.unlink(missing_ok=True)
+    for mount in mounts_under(work):  # dockerd leaves its namespace handle (exec-root/netns) mounted
+        run(["umount", mount], check=False, capture=True)
     if not keep:
         shutil.rmtree(work, ignore_errors=True)
+
+
+def mounts_under(root: Path) -> list[str]:
+    """Mount points below ``root``, deepest first (from /proc/self/mounts; octal escapes undone)."""
+    points = []
+    for line in Path("/proc/self/mounts").read_text().splitlines():
+        point = line.split()[1].encode().decode("unicode_escape")
+        if point.startswith(f"{root}/"):
+            points.append(point)
+    return sorted(points, key=len, reverse=True)
 
 
 if __name__ == "__main__":
