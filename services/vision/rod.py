@@ -31,7 +31,14 @@ import numpy as np
 
 from services.common.sensors import CameraIntrinsics
 from services.common.settings import RodDetectionSettings
-from services.vision.geometry import Plane, pixel_rays, project, ray_factors, resolution_scale
+from services.vision.geometry import (
+    Plane,
+    pixel_rays,
+    project,
+    ray_factors,
+    resolution_scale,
+    scaled_stride,
+)
 from services.vision.lsq import robust_least_squares
 from services.vision.pose import estimate_pca_pose
 from services.vision.results import RodDetection
@@ -40,6 +47,7 @@ Array = np.ndarray
 
 _EDGE_FRACTION = 0.35  # use the middle ±35 % of the region's length for edge lines (away from the caps)
 _MAX_FIT_POINTS = 800
+_FOOTPRINT_CELL_M = 0.004  # table grid for the footprints of tall objects
 
 
 @dataclass(frozen=True)
@@ -84,6 +92,120 @@ def table_is_dark(
     return bool(np.median(v) <= value_max)
 
 
+def rod_width_px(intr: CameraIntrinsics, plane: Plane, diameter_m: float) -> float:
+    """The rod's expected width in pixels where the optical axis meets the table (from depth and f)."""
+    n_z = float(plane.normal[2])
+    z = -plane.d / n_z if n_z < -1e-3 else 1.0
+    return float(intr.fx * diameter_m / max(z, 0.05))
+
+
+def _table_basis(plane: Plane) -> tuple[Array, Array]:
+    n = plane.normal
+    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = a - (a @ n) * n
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(n, e1)
+
+
+def _under_tall_objects(
+    depth_m: Array, intr: CameraIntrinsics, plane: Plane, high: Array, cand: Array
+) -> Array:
+    """Candidate pixels (with depth) that stand on the table footprint of something taller than a rod.
+
+    A black box beside the rod, or the side of a grey box, has its lower band at rod height; its
+    upper part is taller than any rod, and on the table it stands on the same spot. So a pixel whose
+    3-D point lies on the table footprint of tall points belongs to a taller object, not to a rod
+    (this separates a neighbour touching the rod in the image by geometry, not by colour). Tested on
+    every second pixel (the footprints are coarser than that) and returned at full resolution.
+    """
+    s = 2 * scaled_stride(1, intr)
+    out = np.zeros(cand.shape, bool)
+    hr, hc = np.nonzero(high[::s, ::s])
+    cr, cc = np.nonzero(cand[::2, ::2])
+    if len(hr) == 0 or len(cr) == 0:
+        return out
+    hr, hc, cr, cc = hr * s, hc * s, cr * 2, cc * 2
+    e1, e2 = _table_basis(plane)
+    cell = _FOOTPRINT_CELL_M
+
+    def feet(r: Array, c: Array) -> tuple[Array, Array]:
+        p = pixel_rays(intr, r, c) * depth_m[r, c][:, None].astype(float)
+        return np.floor(p @ e1 / cell).astype(np.int64), np.floor(p @ e2 / cell).astype(np.int64)
+
+    hu, hv = feet(hr, hc)
+    cu, cv = feet(cr, cc)
+    u0, v0 = min(hu.min(), cu.min()) - 2, min(hv.min(), cv.min()) - 2
+    nu, nv = max(hu.max(), cu.max()) - u0 + 3, max(hv.max(), cv.max()) - v0 + 3
+    if nu * nv > 4_000_000:  # a degenerate cloud (points far off): no footprint test
+        return out
+    counts = np.bincount((hu - u0) * nv + (hv - v0), minlength=nu * nv).reshape(nu, nv)
+    # Two tall points in a cell: one noisy pixel on top of a rod is no tall object.
+    tall = cv2.dilate((counts >= 2).astype(np.uint8), np.ones((3, 3), np.uint8))
+    under = tall[cu - u0, cv - v0].astype(bool)
+    half = np.zeros(((cand.shape[0] + 1) // 2, (cand.shape[1] + 1) // 2), np.uint8)
+    half[cr[under] // 2, cc[under] // 2] = 1
+    full = cv2.resize(half, (2 * half.shape[1], 2 * half.shape[0]), interpolation=cv2.INTER_NEAREST)
+    return full[: cand.shape[0], : cand.shape[1]].astype(bool) & cand
+
+
+def rod_candidate_mask(
+    color_rgb: Array,
+    depth_m: Array,
+    intr: CameraIntrinsics,
+    plane: Plane,
+    params: RodDetectionSettings,
+) -> Array:
+    """Pixels that may show a rod: dark or specular (bright, grey) metal, from depth and colour together.
+
+    - Dark pixels on a light table count whatever their depth; on a dark mat only where they stand
+      above the table or have no depth (the mat is dark too).
+    - Grey-bright pixels (a highlight on the tube) count where they stand at rod height above the table.
+    - Nothing taller than a rod counts, nor anything on the footprint of a taller object.
+    - Gaps left by a highlight without depth are bridged with a closing scaled to the rod's width in
+      pixels at the table's distance, so it grows with the image and shrinks with range.
+    """
+    valid = depth_m > 0
+    thr = max(params.above_table_min_m, 3.0 * plane.rms_m)
+    h_top = params.diameter_m + max(0.005, 2.5 * plane.rms_m)
+    r, g, b = cv2.split(color_rgb)
+    v = cv2.max(cv2.max(r, g), b)
+    chroma = cv2.subtract(v, cv2.min(cv2.min(r, g), b))
+    dark = v <= params.dark_value_max
+    xs, ys = ray_factors(intr)
+    n = plane.normal.astype(np.float32)
+    heights = n[0] * xs[None, :] + n[1] * ys[:, None]
+    heights += n[2]
+    heights *= depth_m
+    heights += np.float32(plane.d)  # where there is no depth this is the camera's height: masked below
+    high = heights >= h_top
+    high &= valid
+    band = heights > thr
+    band &= valid
+    band &= ~high
+    # A highlight is grey-bright, at rod height or without depth (a saturated stripe often returns
+    # none), and on black metal: within a rod's width of dark pixels.
+    width_px = rod_width_px(intr, plane, params.diameter_m)
+    specular = chroma <= params.specular_chroma_max
+    specular &= band | ~valid
+    specular &= ~dark
+    near = max(3, round(width_px) | 1)
+    specular &= cv2.dilate(dark.view(np.uint8), np.ones((near, near), np.uint8)).view(bool)
+    tol = max(thr, 0.005)
+    sub_h, sub_v = heights[4::8, 4::8], valid[4::8, 4::8]
+    on_table = sub_v & (np.abs(sub_h) < tol)
+    dark_table = bool(np.any(on_table)) and bool(np.median(v[4::8, 4::8][on_table]) <= params.dark_value_max)
+    if dark_table:
+        dark &= band | ~valid
+    else:
+        dark &= ~high
+    cand = dark | specular
+    cand &= ~_under_tall_objects(depth_m, intr, plane, high, cand & valid)
+    mask: Array = cand.astype(np.uint8)
+    mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))  # isolated noisy pixels
+    k = max(3, round(params.gap_close_fraction * width_px) | 1)
+    return cv2.morphologyEx(mask, cv2.MORPH_CLOSE, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)))
+
+
 def detect_rods(
     color_rgb: Array,
     depth_m: Array,
@@ -96,21 +218,9 @@ def detect_rods(
     t_pose = 0.0
     notes: list[str] = []
     r = params.diameter_m / 2.0
-    valid = depth_m > 0
-    thr = max(params.above_table_min_m, 3.0 * plane.rms_m)
+    above_thr = max(params.above_table_min_m, 1.5 * plane.rms_m)
     h_max = params.diameter_m * 1.6 + 0.01
-    dark = dark_mask(color_rgb, params.dark_value_max)
-    dark_table = table_is_dark(color_rgb, depth_m, intr, plane, params.dark_value_max, max(thr, 0.005))
-    if dark_table:
-        with np.errstate(invalid="ignore"):
-            heights = height_map(depth_m, intr, plane)
-            cand = dark & (((heights > thr) & (heights < h_max)) | ~valid)
-    else:
-        cand = dark
-    mask: np.ndarray = cand.astype(np.uint8)
-    if dark_table:  # isolated noisy pixels of a dark mat stand above the table too
-        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
-    mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5)))
+    mask = rod_candidate_mask(color_rgb, depth_m, intr, plane, params)
     # Labels without OpenCV's stats (which cost 20x the labelling here).
     n_lab, labels = cv2.connectedComponents(mask, connectivity=8)
     areas = np.bincount(labels.ravel(), minlength=n_lab)
@@ -141,12 +251,13 @@ def detect_rods(
             continue
         comp_h = heights_at(depth_m, intr, plane, rows, cols)
         comp_valid = np.isfinite(comp_h)
-        if np.any(comp_valid):
-            above_frac = float(np.mean((comp_h[comp_valid] > thr) & (comp_h[comp_valid] < h_max)))
-            if above_frac < 0.3:
+        if np.count_nonzero(comp_valid) >= 10:
+            above_frac = float(np.mean((comp_h[comp_valid] > above_thr) & (comp_h[comp_valid] < h_max)))
+            if above_frac < params.min_above_fraction:
                 notes.append(
                     f"dark elongated region at px ({x0 + w // 2}, {y0 + h // 2}) lies flat on the "
-                    f"table ({above_frac:.0%} of it above), not a rod"
+                    f"table ({above_frac:.0%} of it at rod height, {params.min_above_fraction:.0%} needed), "
+                    "not a rod"
                 )
                 continue
         tp = time.perf_counter()
@@ -369,6 +480,12 @@ def _fit_rod(
             f"dark elongated region at {where}: diameter {diameter * 1000:.1f} mm is not the "
             f"rod's {D0 * 1000:.1f} mm ± {params.diameter_tolerance:.0%}"
         )
+    taller = _taller_than_model(depth_m, intr, plane, axis, lo, hi, r)
+    if taller > params.max_taller_fraction:
+        return None, (
+            f"dark elongated region at {where} stands higher than the rod's {D0 * 1000:.1f} mm diameter "
+            f"({taller:.0%} of the depth there nearer than a rod's surface): a larger object, not the rod"
+        )
     score = np.exp(-0.5 * ((length - L0) / (0.1 * L0)) ** 2) * np.exp(
         -0.5 * ((diameter - D0) / (0.25 * D0)) ** 2
     )
@@ -392,6 +509,35 @@ def _fit_rod(
         endpoints_px=project(ends, intr),
     )
     return det, ""
+
+
+def _taller_than_model(
+    depth_m: Array, intr: CameraIntrinsics, plane: Plane, axis: _Axis, lo: float, hi: float, r: float
+) -> float:
+    """Share of the depth pixels inside the fitted rod's image (its middle 60 % across) that lie
+    nearer than the rod's surface: high for a thicker bar trimmed to rod height by the mask."""
+    ends = np.array([axis.point + lo * axis.direction, axis.point + hi * axis.direction])
+    uv = project(ends, intr)
+    z_mid = float(0.5 * (ends[0, 2] + ends[1, 2]))
+    thick = max(1, int(0.6 * intr.fx * 2 * r / max(z_mid, 0.05)))
+    x0, y0 = np.floor(uv.min(axis=0)).astype(int) - thick
+    x1, y1 = np.ceil(uv.max(axis=0)).astype(int) + thick
+    x0, y0 = max(x0, 0), max(y0, 0)
+    x1, y1 = min(x1, intr.width), min(y1, intr.height)
+    if x1 <= x0 or y1 <= y0:
+        return 0.0
+    band = np.zeros((y1 - y0, x1 - x0), np.uint8)
+    a, b = np.rint(uv - [x0, y0]).astype(int)
+    cv2.line(band, (int(a[0]), int(a[1])), (int(b[0]), int(b[1])), 1, thickness=thick)
+    rows, cols = np.nonzero(band[::2, ::2])
+    rows, cols = rows * 2 + y0, cols * 2 + x0
+    z = depth_m[rows, cols].astype(float)
+    ok = z > 0
+    if np.count_nonzero(ok) < 20:
+        return 0.0
+    s_in, _, _ = _ray_hits(pixel_rays(intr, rows[ok], cols[ok]), axis, r)
+    tol = max(0.008, 2.5 * plane.rms_m)
+    return float(np.mean(z[ok] < s_in - tol))
 
 
 def _pca_axis(pts: Array, plane: Plane, r: float) -> _Axis:

@@ -175,6 +175,7 @@ def _place_objects(
 # --- the hard scene set (issue 15) -----------------------------------------------------------------
 HARD_OBSTACLE_COLORS = ("grey", "white", "black", "blue")
 HARD_CUBE_COLORS = ("red", "green", "blue", "black", "yellow")
+MAX_CUT_CUBE_DEPTH_M = 1.3  # a cube cut by the image edge still lies in vision's depth range (≤ 1.5 m)
 
 
 @dataclass(frozen=True)
@@ -187,7 +188,11 @@ class HardCase:
     highlight_value: float  # peak brightness of the stripe on the rod (0 = none)
     dropout: float  # share of rod pixels without depth
     neighbour_gap_m: float | None  # free gap between the rod and a black neighbour beside it
-    partial_cubes: int  # cubes cut by the image edge
+    cut_boxes: tuple[int, ...]  # indices (in scene.boxes) of cubes cut by the image edge
+
+    @property
+    def partial_cubes(self) -> int:
+        return len(self.cut_boxes)
 
     @property
     def has_rod(self) -> bool:
@@ -231,7 +236,7 @@ def hard_case(seed: int, width: int = 640, height: int = 480) -> HardCase:
         )
         if layout is None:
             continue
-        rods, boxes, obstacle_idx, gap, partial = layout
+        rods, boxes, obstacle_idx, gap, cut = layout
         scene = SyntheticScene(
             T_base_camera=T,
             intrinsics=intr,
@@ -244,7 +249,7 @@ def hard_case(seed: int, width: int = 640, height: int = 480) -> HardCase:
             check = render_scene(replace(scene, intrinsics=check_intr), NoiseModel.off())
             if check.visible_fraction[0 + 10] < 0.9:  # the rod is label 10 (rods first)
                 continue
-        return HardCase(seed, scene, noise, highlight if rods else 0.0, noise.rod_hole_fraction, gap, partial)
+        return HardCase(seed, scene, noise, highlight if rods else 0.0, noise.rod_hole_fraction, gap, cut)
     raise RuntimeError(f"could not lay out a hard scene for seed {seed}")
 
 
@@ -266,7 +271,7 @@ def _hard_layout(
     n_obstacles: int,
     n_cubes: int,
     want_partial: bool,
-) -> tuple[tuple[RodSpec, ...], tuple[BoxSpec, ...], tuple[int, ...], float | None, int] | None:
+) -> tuple[tuple[RodSpec, ...], tuple[BoxSpec, ...], tuple[int, ...], float | None, tuple[int, ...]] | None:
     T_camera_base = np.linalg.inv(T_base_camera)
     spread = 0.30 * dist
     placed: list[tuple[Array, float]] = []
@@ -280,9 +285,10 @@ def _hard_layout(
         )
 
     def straddles(corners: Array) -> bool:
-        """Partly in the image, partly out (cut by its edge), more than a quarter in."""
+        """Partly in the image, partly out (cut by its edge), more than a quarter in, within working range."""
         uv = _project_corners(T_camera_base, intr, corners)
-        if uv is None:
+        depth = (T_camera_base[2, :3] @ corners.T) + T_camera_base[2, 3]
+        if uv is None or depth.max() > MAX_CUT_CUBE_DEPTH_M:
             return False
         ins = (uv[:, 0] >= 0) & (uv[:, 0] < intr.width) & (uv[:, 1] >= 0) & (uv[:, 1] < intr.height)
         return 3 <= int(np.count_nonzero(ins)) <= 6
@@ -337,7 +343,7 @@ def _hard_layout(
                 boxes.append(box)
                 placed.append((xy, rad))
                 break
-    partial = 0
+    cut_idx: list[int] = []
     s = 0.05
     for k in range(n_cubes):
         colour = str(rng.choice(HARD_CUBE_COLORS))
@@ -349,8 +355,9 @@ def _hard_layout(
                 continue
             box = BoxSpec((xy[0], xy[1], s / 2), (s, s, s), rng.uniform(-np.pi, np.pi), colour)
             if straddles(box.corners()) if cut else inside(box.corners()):
+                if cut:
+                    cut_idx.append(len(boxes))
                 boxes.append(box)
                 placed.append((xy, 0.75 * s))
-                partial += int(cut)
                 break
-    return tuple(rods), tuple(boxes), tuple(obstacle_idx), gap, partial
+    return tuple(rods), tuple(boxes), tuple(obstacle_idx), gap, tuple(cut_idx)

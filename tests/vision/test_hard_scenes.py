@@ -7,9 +7,23 @@ of the rod's depth missing. ``make bench`` scores the whole set; these tests ass
 
 from __future__ import annotations
 
-import numpy as np
+from dataclasses import replace
 
-from services.vision.synthetic import COLORS_RGB
+import numpy as np
+import pytest
+
+from services.common.settings import VisionSettings
+from services.vision.pipeline import VisionPipeline
+from services.vision.synthetic import (
+    COLORS_RGB,
+    BoxSpec,
+    NoiseModel,
+    RodSpec,
+    SyntheticScene,
+    d435_intrinsics,
+    look_at_camera,
+    render_scene,
+)
 from services.vision.synthetic_scenes import hard_case
 
 SLICE = range(20000, 20016)  # the first seeds of the bench's set
@@ -55,3 +69,54 @@ def test_both_resolutions_render_the_same_layout():
     lo, hi = hard_case(20001, 640, 480), hard_case(20001, 1280, 720)
     assert hi.render().frame.color.shape == (720, 1280, 3)
     assert lo.render().frame.color.shape == (480, 640, 3)
+
+
+def _rod_error(result, case) -> tuple[float, float]:
+    truth = case.scene.rods[0]
+    det = min(result.rods, key=lambda d: np.linalg.norm(d.center_base - np.asarray(truth.center)))
+    centre = float(np.linalg.norm(det.center_base - np.asarray(truth.center)))
+    return centre, float(np.degrees(np.arccos(min(1.0, abs(det.axis_base @ truth.axis)))))
+
+
+@pytest.mark.parametrize(("width", "height", "seeds"), [(640, 480, SLICE), (1280, 720, range(20000, 20006))])
+def test_rod_is_found_on_the_hard_slice_and_no_ghost_appears(width, height, seeds):
+    """Highlights, black neighbours, dropout: the rod is found, within 2 mm and 1°, and nothing else is a rod."""
+    pipe = VisionPipeline(VisionSettings(detect_cubes=False))
+    n_rod = 0
+    for seed in seeds:
+        case = hard_case(seed, width, height)
+        result = pipe.detect(case.render().frame, case.scene.T_base_camera)
+        if not case.has_rod:
+            assert result.rods == (), f"seed {seed}: ghost rod {result.rods[0].center_base}"
+            continue
+        n_rod += 1
+        assert len(result.rods) == 1, f"seed {seed}: {len(result.rods)} rods, notes {result.notes}"
+        centre, axis = _rod_error(result, case)
+        assert centre <= 0.002 and axis <= 1.0, f"seed {seed}: {centre * 1e3:.2f} mm, {axis:.2f}°"
+    assert n_rod >= len(seeds) - 2
+
+
+def test_saturated_stripe_does_not_cut_the_rod_in_two():
+    """The old dark-only mask split a rod with a saturated highlight into two thin halves."""
+    scene = hard_case(20062).scene  # a saturated stripe, 86 % of the rod's depth missing
+    pipe = VisionPipeline(VisionSettings(detect_cubes=False))
+    for stripe in (0.0, 180.0, 255.0):
+        noise = replace(hard_case(20062).noise, rod_stripe_value=stripe, rod_stripe_halfwidth_deg=18.0)
+        result = pipe.detect(render_scene(scene, noise, seed=3).frame, scene.T_base_camera)
+        assert len(result.rods) == 1, (stripe, result.notes)
+        assert result.rods[0].diameter_m == pytest.approx(0.022, abs=0.004)
+
+
+def test_black_cube_beside_the_rod_is_told_apart_by_geometry():
+    """A black cube 12 mm from the rod touches it in the image; its footprint keeps it out of the rod."""
+    cam = look_at_camera(np.array([0.45, 0.0, 0.0]), 0.8, 55.0, 0.0)
+    rod = RodSpec(center=(0.45, 0.0, 0.011), yaw=np.pi / 2)  # across the view
+    cube = BoxSpec(
+        center=(0.45 - 0.011 - 0.012 - 0.025, 0.02, 0.025), size=(0.05,) * 3, yaw=0.0, color="black"
+    )
+    scene = SyntheticScene(T_base_camera=cam, intrinsics=d435_intrinsics(), rods=(rod,), boxes=(cube,))
+    rendered = render_scene(scene, NoiseModel(), seed=4)
+    result = VisionPipeline(VisionSettings(detect_cubes=False)).detect(rendered.frame, cam)
+    assert len(result.rods) == 1, result.notes
+    centre = np.linalg.norm(result.rods[0].center_base - np.asarray(rod.center))
+    assert centre < 0.002 and result.rods[0].length_m == pytest.approx(0.2, abs=0.006)

@@ -42,6 +42,18 @@ class RodDetectionSettings(Model):
     diameter_tolerance: float = Field(0.45, gt=0, le=1, description="accepted relative diameter error")
     dark_value_max: int = Field(70, ge=0, le=255, description="HSV value (0-255) at or below = dark")
     above_table_min_m: float = Field(0.004, ge=0, le=0.1)
+    min_above_fraction: float = Field(
+        0.5, ge=0, le=1, description="share of a candidate's depth pixels that must stand at rod height"
+    )
+    specular_chroma_max: int = Field(
+        40, ge=0, le=255, description="max(R,G,B) - min(R,G,B) at or below = grey: a highlight on the metal"
+    )
+    max_taller_fraction: float = Field(
+        0.3, gt=0, le=1, description="share of depth inside a fitted rod nearer than its surface = not a rod"
+    )
+    gap_close_fraction: float = Field(
+        0.5, gt=0, le=2, description="closing element, as a share of the rod's expected width in pixels"
+    )
     min_aspect_ratio: float = Field(3.0, ge=1)
     min_area_px: int = Field(120, ge=1, description="at 640 px width (scaled by width²)")
     min_depth_points: int = Field(40, ge=6, description="below this the pose comes from the silhouette")
@@ -63,6 +75,28 @@ class ObstacleRuleSettings(Model):
     margin_m: float = Field(0.01, ge=0, le=0.5, description="added on every side of the obstacle box")
 
 
+class ColorClassSettings(Model):
+    """One named colour of the colour table: OpenCV hue ranges (0-179, [lo, hi)) of saturated pixels."""
+
+    name: str = Field(min_length=1)
+    hue_ranges: list[tuple[int, int]] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _ranges(self) -> ColorClassSettings:
+        for lo, hi in self.hue_ranges:
+            if not 0 <= lo < hi <= 180:
+                raise ValueError(f"colour {self.name!r}: hue range [{lo}, {hi}) must lie in [0, 180)")
+        return self
+
+
+DEFAULT_COLOR_TABLE: tuple[ColorClassSettings, ...] = (
+    ColorClassSettings(name="red", hue_ranges=[(0, 10), (160, 180)]),
+    ColorClassSettings(name="yellow", hue_ranges=[(20, 35)]),
+    ColorClassSettings(name="green", hue_ranges=[(35, 90)]),
+    ColorClassSettings(name="blue", hue_ranges=[(90, 135)]),
+)
+
+
 class CubeDetectionSettings(Model):
     """Seed 004 cube pipeline: depth thresholds, RANSAC plane, DBSCAN, colour labels."""
 
@@ -78,6 +112,12 @@ class CubeDetectionSettings(Model):
     black_value_max: int = Field(70, ge=0, le=255, description="mean HSV value at or below = black")
     min_saturation: int = Field(60, ge=0, le=255, description="mean saturation below this = unlabelled")
     obstacle: ObstacleRuleSettings = ObstacleRuleSettings()
+    colors: tuple[ColorClassSettings, ...] = Field(
+        DEFAULT_COLOR_TABLE, description="colour table: black is value <= black_value_max, before these"
+    )
+    # Safety first: whatever stands on the table and is neither a cube nor a rod goes into the planning
+    # scene as an obstacle box, whatever its colour or size (false = only the obstacle rule's boxes).
+    unrecognised_as_obstacles: bool = True
 
     @model_validator(mode="after")
     def _range(self) -> CubeDetectionSettings:
