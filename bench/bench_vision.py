@@ -189,6 +189,70 @@ def hard_set_figures(width: int, height: int, n: int = N_HARD, seed0: int = HARD
     }
 
 
+def _seen_points_base(rendered, label: int, T: np.ndarray, step: int = 3) -> np.ndarray:
+    """Base-frame points (noiseless depth) of the pixels that show object ``label``."""
+    rows, cols = np.nonzero(rendered.labels[::step, ::step] == label)
+    rows, cols = rows * step, cols * step
+    intr = rendered.scene.intrinsics
+    z = rendered.depth_true_m[rows, cols]
+    p = np.column_stack([(cols - intr.cx) / intr.fx * z, (rows - intr.cy) / intr.fy * z, z])
+    return p @ T[:3, :3].T + T[:3, 3]
+
+
+def hard_set_scene_figures(
+    width: int, height: int, n: int = N_HARD, seed0: int = HARD_SEED0
+) -> dict[str, object]:
+    """Safety and cubes on the hard set (full pipeline): every seen object in the planning scene
+    (a detected cube or rod, or inside an obstacle box), cube colour on whole cubes, cube latency."""
+    pipe = VisionPipeline()
+    cubes_only = VisionPipeline(VisionSettings(detect_rods=False))
+    seen, missing, n_whole, colour_ok, ms, missing_seeds = 0, 0, 0, 0, [], []
+    scale = (width / 640) ** 2
+    # What vision promises to see: min_cluster_points (at 640 px) standing more than plane_residual_m up.
+    min_px, min_height = pipe.settings.cubes.min_cluster_points, pipe.settings.cubes.plane_residual_m
+    for k in range(n):
+        case = hard_case(seed0 + k, width, height)
+        rendered = case.render()
+        T = case.scene.T_base_camera
+        res = pipe.detect(rendered.frame, T)
+        t0 = time.perf_counter()
+        cubes_only.detect(rendered.frame, T)
+        ms.append((time.perf_counter() - t0) * 1e3)
+        n_rods = len(case.scene.rods)
+        for i, box in enumerate(case.scene.boxes):
+            label = 10 + n_rods + i
+            pts = _seen_points_base(rendered, label, T, step=1)
+            if np.count_nonzero(pts[:, 2] > min_height) < min_px * scale:
+                continue  # not an object above the height threshold (e.g. a sliver at the image edge)
+            seen += 1
+            pts = pts[::9]
+            covered = np.zeros(len(pts), bool)
+            for o in res.obstacles:
+                covered |= o.contains(pts)
+            for c in res.cubes:
+                covered |= np.linalg.norm(pts - c.centroid_base, axis=1) < 0.045
+            if covered.mean() < 0.8:
+                missing += 1
+                missing_seeds.append(case.seed)
+            whole = (
+                i not in case.scene.obstacle_indices and i not in case.cut_boxes and box.size == (0.05,) * 3
+            )
+            if whole and rendered.visible_fraction.get(label, 0.0) >= 0.99:
+                d = [np.linalg.norm(c.centroid_base - np.asarray(box.center)) for c in res.cubes]
+                n_whole += 1
+                colour_ok += (
+                    bool(d) and min(d) < 0.02 and res.cubes[int(np.argmin(d))].color_label == box.color
+                )
+    return {
+        "seen": seen,
+        "missing": missing,
+        "missing_seeds": missing_seeds[:12],
+        "whole_cubes": n_whole,
+        "colour": colour_ok / max(n_whole, 1),
+        "cube_latency_median_ms": float(np.median(ms)),
+    }
+
+
 def print_hard_set(n: int = N_HARD) -> None:
     print(f"hard scene set (issue 15), {n} seeded scenes per resolution, 1 in 8 without a rod")
     print(f"  load average at start: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
@@ -200,6 +264,13 @@ def print_hard_set(n: int = N_HARD) -> None:
             f"ghost rods {f['ghosts']} ({f['n_free']} rod-free scenes; target 0), "
             f"rod latency median {f['latency_median_ms']:.1f} ms / p95 {f['latency_p95_ms']:.1f} ms "
             f"(≤ {lat_target:.0f}); missed seeds {f['misses']}"
+        )
+        g = hard_set_scene_figures(width, height, n)
+        print(
+            f"  {width}x{height}: seen objects missing from the planning scene {g['missing']} of {g['seen']} "
+            f"(target 0; seeds {g['missing_seeds']}), whole cubes colour right {g['colour']:.1%} of "
+            f"{g['whole_cubes']} (≥ 99.5 %), cube latency median {g['cube_latency_median_ms']:.1f} ms"
+            + (" (≤ 10)" if width == 640 else "")
         )
     print(f"  load average at end: {os.getloadavg()[0]:.1f}")
 

@@ -20,6 +20,7 @@
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -27,6 +28,7 @@ from sklearn.cluster import DBSCAN
 
 from services.common.sensors import CameraIntrinsics
 from services.common.settings import CubeDetectionSettings
+from services.common.settings.vision import DEFAULT_COLOR_TABLE, ColorClassSettings
 from services.vision.geometry import (
     Plane,
     backproject,
@@ -36,28 +38,32 @@ from services.vision.geometry import (
     transform_points,
 )
 from services.vision.lsq import robust_least_squares
-from services.vision.results import CubeDetection, ObstacleBox
+from services.vision.results import CubeDetection, ObstacleBox, Visibility
 
 Array = np.ndarray
 
-COLOR_LABELS = ("black", "red", "blue", "green")
 _MAX_CUBE_POINTS = 300
+# A cluster cut by the image edge is the visible part of something larger: reported from a quarter of
+# the usual minimum size, so a corner at the edge is not left out of the planning scene.
+_EDGE_CLUSTER_DIVISOR = 4
 
 
-def classify_color(mean_rgb: Array, black_value_max: int, min_saturation: int) -> str:
-    """Colour label of a cluster from its mean RGB (uint8 scale) through HSV."""
+def classify_color(
+    mean_rgb: Array,
+    black_value_max: int,
+    min_saturation: int,
+    table: tuple[ColorClassSettings, ...] = DEFAULT_COLOR_TABLE,
+) -> str:
+    """Colour label of a cluster from its mean RGB (uint8 scale) through HSV and the colour table."""
     px = np.clip(np.rint(np.asarray(mean_rgb, dtype=float)), 0, 255).astype(np.uint8).reshape(1, 1, 3)
     h, s, v = (int(x) for x in cv2.cvtColor(px, cv2.COLOR_RGB2HSV)[0, 0])
     if v <= black_value_max:
         return "black"
     if s < min_saturation:
         return "unknown"
-    if h < 10 or h >= 160:  # OpenCV hue is 0-179
-        return "red"
-    if 35 <= h < 90:
-        return "green"
-    if 90 <= h < 135:
-        return "blue"
+    for colour in table:
+        if any(lo <= h < hi for lo, hi in colour.hue_ranges):
+            return colour.name
     return "unknown"
 
 
@@ -106,17 +112,20 @@ def detect_cubes_and_obstacles(
     T_cam_table = table_frame(plane)
     T_table_cam = np.linalg.inv(T_cam_table)
     cubes: list[CubeDetection] = []
-    obstacles: list[ObstacleBox] = []
+    found: list[_ObstacleCluster] = []
     rule = params.obstacle
     for k in range(labels.max() + 1):
         sel = labels == k
         n_full = round(np.count_nonzero(sel) * scale)
-        if n_full < params.min_cluster_points:
+        if n_full < params.min_cluster_points / _EDGE_CLUSTER_DIVISOR:
+            continue
+        cut = _visibility(rows[sel], cols[sel], stride, intr) is Visibility.CUT_BY_EDGE
+        if n_full < params.min_cluster_points and not cut:
             continue
         cp = pts[sel]
-        colour = classify_color(
-            color_rgb[rows[sel], cols[sel]].mean(axis=0), params.black_value_max, params.min_saturation
-        )
+        mean_rgb = color_rgb[rows[sel], cols[sel]].mean(axis=0)
+        colour = classify_color(mean_rgb, params.black_value_max, params.min_saturation, params.colors)
+        visibility = Visibility.CUT_BY_EDGE if cut else Visibility.WHOLE
         local = transform_points(T_table_cam, cp)
         (cx, cy), sides, angle = cv2.minAreaRect(local[:, :2].astype(np.float32))
         extent = float(max(sides))
@@ -129,21 +138,109 @@ def detect_cubes_and_obstacles(
             "both": by_points and by_extent,
         }[rule.require]
         if large and (rule.color == "any" or colour == rule.color):
-            obstacles.append(_obstacle_box(cp, plane, colour, n_full, intr, T_base_camera, rule.margin_m))
+            found.append(_ObstacleCluster(cp, colour, n_full, mean_rgb, visibility, True))
             continue
         size = params.cube_size_m
         top = float(np.percentile(local[:, 2], 90))
-        if extent > 1.6 * size or not 0.7 * size < top < 1.3 * size:
-            notes.append(
-                f"{colour} cluster of {n_full} px, {extent * 1000:.0f} mm across and "
-                f"{top * 1000:.0f} mm high: neither a cube nor the obstacle"
+        cube_like = extent <= 1.6 * size and 0.7 * size < top < 1.3 * size
+        if cube_like and visibility is Visibility.WHOLE:
+            cubes.append(
+                replace(
+                    _fit_cube(local, (cx, cy, np.deg2rad(angle)), size, colour, n_full, T_cam_table, intr),
+                    mean_rgb=mean_rgb,
+                )
             )
             continue
-        cubes.append(_fit_cube(local, (cx, cy, np.deg2rad(angle)), size, colour, n_full, T_cam_table, intr))
+        what = (
+            f"{colour} cube cut by the image edge: its centre is unknown, not pickable"
+            if cube_like
+            else f"{colour} cluster of {n_full} px, {extent * 1000:.0f} mm across and "
+            f"{top * 1000:.0f} mm high: neither a cube nor the obstacle"
+        )
+        if params.unrecognised_as_obstacles:
+            found.append(_ObstacleCluster(cp, colour, n_full, mean_rgb, visibility, False))
+            what += "; reported as an obstacle"
+        notes.append(what)
+    obstacles = [
+        _obstacle_box(
+            o.points,
+            plane,
+            o.colour,
+            o.n_full,
+            intr,
+            T_base_camera,
+            rule.margin_m,
+            o.mean_rgb,
+            o.visibility,
+            o.recognised,
+        )
+        for o in _merge_touching(found, plane, rule.margin_m)
+    ]
     timings = {"cube_segmentation": (t1 - t0) * 1e3, "cube_pose": _ms(t1)}
     if T_base_camera is not None:
         cubes = [c.in_base(T_base_camera) for c in cubes]
     return cubes, obstacles, notes, timings
+
+
+@dataclass(frozen=True)
+class _ObstacleCluster:
+    points: Array  # camera frame
+    colour: str
+    n_full: int
+    mean_rgb: Array
+    visibility: Visibility
+    recognised: bool
+
+
+def _merge_touching(found: list[_ObstacleCluster], plane: Plane, margin: float) -> list[_ObstacleCluster]:
+    """One obstacle per object: clusters whose boxes (margin included) overlap are one box.
+
+    DBSCAN can split a box seen edge-on; its pieces would each be reported, and a piece is not what the
+    planner should avoid, the whole is."""
+    out = list(found)
+    merged = True
+    while merged and len(out) > 1:
+        merged = False
+        bounds = []
+        for o in out:
+            solid = np.vstack([o.points, plane.project(o.points)])
+            bounds.append((solid.min(axis=0) - margin, solid.max(axis=0) + margin))
+        for i in range(len(out)):
+            for j in range(i + 1, len(out)):
+                (lo_i, hi_i), (lo_j, hi_j) = bounds[i], bounds[j]
+                if np.all(lo_i <= hi_j) and np.all(lo_j <= hi_i):
+                    a, b = out[i], out[j]
+                    big = a if (a.recognised, a.n_full) >= (b.recognised, b.n_full) else b
+                    n = a.n_full + b.n_full
+                    out[i] = _ObstacleCluster(
+                        np.vstack([a.points, b.points]),
+                        big.colour,
+                        n,
+                        (a.mean_rgb * a.n_full + b.mean_rgb * b.n_full) / n,
+                        Visibility.CUT_BY_EDGE
+                        if Visibility.CUT_BY_EDGE in (a.visibility, b.visibility)
+                        else big.visibility,
+                        a.recognised or b.recognised,
+                    )
+                    del out[j]
+                    merged = True
+                    break
+            if merged:
+                break
+    return out
+
+
+def _visibility(rows: Array, cols: Array, stride: int, intr: CameraIntrinsics) -> Visibility:
+    """Cut by the image edge when the cluster reaches the outermost sampled pixels."""
+    edge = stride + 1
+    if (
+        rows.min() < edge
+        or cols.min() < edge
+        or rows.max() >= intr.height - edge
+        or cols.max() >= intr.width - edge
+    ):
+        return Visibility.CUT_BY_EDGE
+    return Visibility.WHOLE
 
 
 def _ms(t0: float) -> float:
@@ -233,6 +330,9 @@ def _obstacle_box(
     intr: CameraIntrinsics,
     T_base_camera: Array | None,
     margin: float,
+    mean_rgb: Array | None = None,
+    visibility: Visibility = Visibility.WHOLE,
+    recognised: bool = True,
 ) -> ObstacleBox:
     solid = np.vstack([cp, plane.project(cp)])  # the box stands on the table
     lo, hi = solid.min(axis=0) - margin, solid.max(axis=0) + margin
@@ -251,6 +351,9 @@ def _obstacle_box(
         corners_px=project(corners_cam, intr),
         min_base=min_base,
         max_base=max_base,
+        mean_rgb=mean_rgb,
+        visibility=visibility,
+        recognised=recognised,
     )
 
 

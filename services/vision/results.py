@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from enum import Enum
 
 import numpy as np
 
@@ -18,6 +19,14 @@ def _frame_from_axis(axis: Array, up: Array) -> Array:
     z = up - (up @ x) * x
     z /= np.linalg.norm(z)
     return np.column_stack([x, np.cross(z, x), z])
+
+
+class Visibility(Enum):
+    """How much of an object the camera sees: a cut or occluded cube is not fitted as a whole one."""
+
+    WHOLE = "whole"
+    CUT_BY_EDGE = "cut_by_edge"  # part of it lies outside the image
+    OCCLUDED = "occluded"  # something nearer hides part of it
 
 
 @dataclass(frozen=True)
@@ -75,6 +84,8 @@ class CubeDetection:
     image_uv: Array  # (2,) pixel of the centre, for overlays
     centroid_base: Array | None = None
     rotation_base: Array | None = None
+    mean_rgb: Array | None = None  # mean colour of its pixels (what an "unknown" colour was)
+    visibility: Visibility = Visibility.WHOLE
 
     @property
     def quat_cam(self) -> Array:
@@ -96,6 +107,9 @@ class ObstacleBox:
     corners_px: Array  # (8, 2) projected corners of the base-frame box (camera-frame box without T)
     min_base: Array | None = None
     max_base: Array | None = None
+    mean_rgb: Array | None = None
+    visibility: Visibility = Visibility.WHOLE
+    recognised: bool = True  # False: not the obstacle rule's kind, reported because it stands there
 
     def contains(self, points_base: Array) -> Array:
         if self.min_base is None or self.max_base is None:

@@ -6,10 +6,20 @@ import numpy as np
 import pytest
 
 from services.common.settings import CubeDetectionSettings, ObstacleRuleSettings, VisionSettings
+from services.common.settings.vision import DEFAULT_COLOR_TABLE
 from services.vision.cubes import classify_color
 from services.vision.pipeline import VisionPipeline
-from services.vision.synthetic import COLORS_RGB, NoiseModel, render_scene
-from services.vision.synthetic_scenes import random_scene
+from services.vision.results import Visibility
+from services.vision.synthetic import (
+    COLORS_RGB,
+    BoxSpec,
+    NoiseModel,
+    SyntheticScene,
+    d435_intrinsics,
+    look_at_camera,
+    render_scene,
+)
+from services.vision.synthetic_scenes import hard_case, random_scene
 
 N_SCENES = 50
 CENTROID_TOL_M = 0.005
@@ -75,13 +85,23 @@ def test_obstacle_rule_is_configurable():
         cubes=CubeDetectionSettings(obstacle=ObstacleRuleSettings(require="points", min_points=10**7))
     )
     result = VisionPipeline(strict).detect(frame, scene.T_base_camera)
+    # Safety first: the box is not the rule's obstacle, yet it stands there, so it is still reported.
+    assert [o.recognised for o in result.obstacles] == [False]
+    assert any(
+        "neither a cube nor the obstacle" in n and "reported as an obstacle" in n for n in result.notes
+    )
+    strict_only = strict.model_copy(
+        update={"cubes": strict.cubes.model_copy(update={"unrecognised_as_obstacles": False})}
+    )
+    result = VisionPipeline(strict_only).detect(frame, scene.T_base_camera)
     assert result.obstacles == ()
     assert any("neither a cube nor the obstacle" in n for n in result.notes)
     red = VisionSettings(
         cubes=CubeDetectionSettings(obstacle=ObstacleRuleSettings(color="red", min_extent_m=0.04))
     )
     result = VisionPipeline(red).detect(frame, scene.T_base_camera)
-    assert [o.color_label for o in result.obstacles] == ["red"]  # the red cube now counts as an obstacle
+    # the red cube now counts as the obstacle (the blue box is still one, as an unrecognised object)
+    assert [o.color_label for o in result.obstacles if o.recognised] == ["red"]
     assert result.cubes == ()
 
 
@@ -92,3 +112,50 @@ def test_dbscan_parameters_come_from_settings():
     result = VisionPipeline(coarse).detect(frame, scene.T_base_camera)
     assert result.cubes == ()  # no point has a million neighbours: everything is noise
     assert "no cubes detected" in result.notes
+
+
+def _scene_with(boxes: list[BoxSpec], target=(0.45, 0.0)) -> SyntheticScene:
+    cam = look_at_camera(np.array([target[0], target[1], 0.0]), 0.8, 55.0, 0.0)
+    return SyntheticScene(T_base_camera=cam, intrinsics=d435_intrinsics(), boxes=tuple(boxes))
+
+
+@pytest.mark.parametrize("colour", ["grey", "white", "black"])
+def test_an_obstacle_of_any_colour_goes_into_the_planning_scene(colour):
+    """Safety first: a box that is not the obstacle rule's colour is still reported as an obstacle."""
+    box = BoxSpec(center=(0.42, 0.05, 0.05), size=(0.14, 0.10, 0.10), yaw=0.3, color=colour)
+    scene = _scene_with([box])
+    result = VisionPipeline().detect(render_scene(scene, NoiseModel(), seed=7).frame, scene.T_base_camera)
+    assert result.cubes == ()
+    assert len(result.obstacles) == 1, result.notes
+    ob = result.obstacles[0]
+    assert np.all(ob.contains(box.corners())) and not ob.recognised
+    assert ob.mean_rgb is not None and ob.visibility is Visibility.WHOLE
+
+
+def test_a_cube_cut_by_the_image_edge_is_no_cube_but_an_obstacle():
+    """Fitted as a whole cube it lands 30-90 mm off: it is marked cut and kept out of picking."""
+    case = next(c for c in map(hard_case, range(20000, 20040)) if c.cut_boxes)
+    rendered = case.render()
+    result = VisionPipeline().detect(rendered.frame, case.scene.T_base_camera)
+    cut = case.scene.boxes[case.cut_boxes[0]]
+    assert all(np.linalg.norm(c.centroid_base - np.asarray(cut.center)) > 0.05 for c in result.cubes)
+    edge = [o for o in result.obstacles if o.visibility is Visibility.CUT_BY_EDGE]
+    assert edge, result.notes
+    assert any("cut by the image edge" in n for n in result.notes)
+
+
+def test_colour_table_knows_yellow_and_unknown_colours_keep_their_mean():
+    assert classify_color([215, 190, 40], 70, 60) == "yellow"
+    assert classify_color([215 * 0.55, 190 * 0.55, 40 * 0.55], 70, 60) == "yellow"
+    yellow = BoxSpec(center=(0.45, 0.0, 0.025), size=(0.05,) * 3, yaw=0.2, color="yellow")
+    scene = _scene_with([yellow])
+    frame = render_scene(scene, NoiseModel(), seed=8).frame
+    result = VisionPipeline().detect(frame, scene.T_base_camera)
+    assert [c.color_label for c in result.cubes] == ["yellow"]
+    no_yellow = VisionSettings(
+        cubes=CubeDetectionSettings(colors=tuple(c for c in DEFAULT_COLOR_TABLE if c.name != "yellow"))
+    )
+    result = VisionPipeline(no_yellow).detect(frame, scene.T_base_camera)
+    (cube,) = result.cubes
+    assert cube.color_label == "unknown"
+    assert cube.mean_rgb is not None and cube.mean_rgb[0] > 100 and cube.mean_rgb[2] < 60  # still yellowish
