@@ -140,8 +140,10 @@ def build_mjcf(
         "material",
         name="rod_metal",
         rgba=_f(*COLORS_RGBA["black"]),
-        specular="0.9",
-        shininess="0.8",
+        # Polished black metal: full specular with a lobe wide enough to run along the tube as a stripe
+        # (the camera's highlight model then brings it to what a colour sensor records under cell lights).
+        specular="1",
+        shininess="0.3",
         reflectance="0.05",
     )
     ET.SubElement(asset, "material", name="robot_white", rgba="0.92 0.92 0.9 1", specular="0.3")
