@@ -100,8 +100,15 @@ def detect_cubes_and_obstacles(
     pts, rows, cols = backproject(depth_m, intr, stride, mask, params.min_depth_m, params.max_depth_m)
     h = plane.signed_distance(pts)
     keep = (h > params.plane_residual_m) & (h < params.max_height_m)
-    pts, rows, cols = pts[keep], rows[keep], cols[keep]
     notes: list[str] = []
+    if T_base_camera is not None and params.robot_base_radius_m > 0:
+        # the arm's own base stands on the table too: it is the robot, not an obstacle in its way
+        p_base = transform_points(T_base_camera, pts)
+        own = keep & (np.hypot(p_base[:, 0], p_base[:, 1]) < params.robot_base_radius_m)
+        if own.any():
+            notes.append(f"{int(own.sum())} points on the robot's own base left out")
+        keep &= ~own
+    pts, rows, cols = pts[keep], rows[keep], cols[keep]
     scale = stride * stride / resolution_scale(intr) ** 2  # one strided point = this many 640-px pixels
     min_samples = max(3, round(params.dbscan_min_points / scale))
     if len(pts) < min_samples:

@@ -108,6 +108,9 @@ class CubeDetectionSettings(Model):
     dbscan_min_points: int = Field(40, ge=2, description="on a full 640-px-wide image; scaled by stride²")
     cluster_stride: int = Field(4, ge=1, le=8, description="cloud stride for DBSCAN (px at 640 px width)")
     min_cluster_points: int = Field(200, ge=1, description="pixels of a full 640-px-wide image")
+    robot_base_radius_m: float = Field(
+        0.13, ge=0, le=0.5, description="points this close to the robot's base axis are the robot itself"
+    )
     cube_size_m: float = Field(0.05, gt=0, le=0.5)
     black_value_max: int = Field(70, ge=0, le=255, description="mean HSV value at or below = black")
     min_saturation: int = Field(60, ge=0, le=255, description="mean saturation below this = unlabelled")
