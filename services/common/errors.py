@@ -80,6 +80,12 @@ class GraspFailureError(ExecutionError):
     pass
 
 
+class RobotBusyError(ExecutionError):
+    """The arm is executing another motion: one stream at a time, a second request is refused, not queued."""
+
+    grpc_code = grpc.StatusCode.FAILED_PRECONDITION
+
+
 class ControllerError(ExecutionError):
     """The robot controller refused a command or raised an alarm."""
 

@@ -24,6 +24,7 @@ from services.common.errors import (
     EmergencyStopError,
     ExecutionError,
     InvalidInputError,
+    RobotBusyError,
     RobotCommunicationError,
     TrajectoryExecutionError,
 )
@@ -32,7 +33,7 @@ from services.dobot import RobotMode
 from services.kinematics import analytic
 from services.kinematics.robot_models import RobotSpec
 from services.kinematics.trajectory import JointTrajectory
-from services.robot.client import DobotClient, FeedbackState
+from services.robot.client import DobotClient, FeedbackState, LinkState
 from services.robot.gripper import DigitalOutputGripper, GripperState
 from services.robot.safety import SafetyLimits
 
@@ -73,11 +74,13 @@ class RobotDriver:
         )
         self.gripper = DigitalOutputGripper(client, settings.gripper)
         self._abort = asyncio.Event()
+        self._abort_by_estop = False  # what set ``_abort``: the e-stop, or a plain stop
         self._motion_lock = asyncio.Lock()
         # the last target of a trajectory that continues (streamed, not yet executed): the next
         # trajectory starts from it, not from the measured joints, which trail it while moving
         self._continue_from: np.ndarray | None = None
         self._continue_id: int | None = None  # the queue ID of that target
+        self._continue_tail: np.ndarray | None = None  # its last two targets (the acceleration check)
 
     async def start(self) -> None:
         await self.client.connect()
@@ -137,6 +140,7 @@ class RobotDriver:
     # ------------------------------------------------------------------ stop
     async def stop(self) -> None:
         """Stop queued motion and abort any trajectory being streamed."""
+        self._abort_by_estop = False
         self._abort.set()
         self._continue_from = None
         await self.client.stop()
@@ -144,6 +148,9 @@ class RobotDriver:
     async def emergency_stop(self, release: bool = False) -> None:
         """Press (or release) the software e-stop. Sent before anything else is looked at."""
         if not release:
+            # a stream cut by the e-stop fails as an EmergencyStopError (the task's wait-for-operator
+            # path), even before the feedback shows the e-stop
+            self._abort_by_estop = True
             self._abort.set()
             self._continue_from = None
         await self.client.emergency_stop(press=not release)
@@ -171,8 +178,10 @@ class RobotDriver:
         v = None if speed_ratio is None else int(speed_ratio)
         if v is not None and not 1 <= v <= 100:
             raise InvalidInputError(f"speed_ratio must be 1-100, got {v}")
+        self._refuse_if_busy("MoveJoints")
         async with self._motion_lock:
             self._abort.clear()
+            self._abort_by_estop = False
             t0 = time.perf_counter()
 
             async def step() -> FeedbackState:
@@ -205,9 +214,10 @@ class RobotDriver:
         ``continues``: another trajectory follows without a stop (this one ends in motion): return as
         soon as the last target is queued; the next call starts from that target, checked against it.
 
-        Checked first, as a whole: joint names, the start against the measured
-        joints, every streamed target against joint and workspace limits, and the
-        joint speeds between targets. Streaming stops at once on stop/e-stop or
+        Checked first, as a whole and under the motion lock (a second request while one streams is
+        refused as busy): the link, joint names, the start against the measured joints (or the last
+        queued target), every streamed target against joint and workspace limits, and the joint speeds
+        and accelerations between targets. Streaming stops at once on stop/e-stop or
         when the controller alarms. A guarded move passes ``stop_when``: as a
         feedback packet satisfies it the queue is stopped and the result says so.
         """
@@ -220,13 +230,51 @@ class RobotDriver:
         period = servo_period_s or self.settings.robot.servo_period_s
         if not 0.004 <= period <= 1.0:
             raise InvalidInputError(f"servo period must be within 4 ms..1 s, got {period}")
+        self._refuse_if_busy("trajectory")
+        async with self._motion_lock:
+            # every check runs under the lock, on the state the stream will start from: a request that
+            # came in while another motion ran is judged against where that motion left the arm
+            targets, q_before = self._checked_targets(traj, period)
+            self._abort.clear()
+            self._abort_by_estop = False
+            if stop_when is not None:
+                return await self._guarded(targets, period, stop_when)
+            res = await self._stream(targets, period, wait_done=not continues)
+            if continues:
+                self._continue_from = targets[-1].copy()
+                self._continue_tail = np.vstack([q_before, targets])[-2:].copy()
+            return res
+
+    def _refuse_if_busy(self, what: str) -> None:
+        if self._motion_lock.locked():
+            raise RobotBusyError(
+                f"{what} refused: the arm is executing another motion (one stream at a time); "
+                "wait for it to end or stop it first"
+            )
+
+    def _checked_targets(self, traj: JointTrajectory, period: float) -> tuple[np.ndarray, np.ndarray]:
+        """The ServoJ targets of ``traj`` and the two positions they continue from, after every check:
+        link, e-stop, alarm, the start against where the arm is (or its last queued target), joint and
+        workspace limits, joint speeds and accelerations. Raises before anything is sent."""
+        if self.client.link is not LinkState.UP:
+            raise RobotCommunicationError(
+                f"robot link is {self.client.link.value}: the last feedback may be stale; nothing sent"
+            )
         fb = self.feedback
-        following = self._continue_from is not None and not fb.in_error and self._still_queued(fb)
+        if fb.estop:
+            raise EmergencyStopError("emergency stop is active")
+        if fb.in_error:
+            raise ControllerError("controller is in alarm; clear it before executing a trajectory")
+        following = self._continue_from is not None and self._still_queued(fb)
         # following: the previous trajectory's targets are still queued or running; start from its last
-        q_now = self._continue_from if following and self._continue_from is not None else fb.q.copy()
-        self._continue_from = None
+        if following and self._continue_from is not None and self._continue_tail is not None:
+            q_now, q_before = self._continue_from, self._continue_tail
+        else:
+            q_now = fb.q.copy()
+            q_before = np.vstack([q_now, q_now])  # at rest
+        self._continue_from = self._continue_tail = None
         start_err = float(np.max(np.abs(traj.positions[0] - q_now)))
-        if start_err > START_TOLERANCE_RAD:
+        if not np.isfinite(start_err) or start_err > START_TOLERANCE_RAD:
             raise InvalidInputError(
                 f"trajectory starts {np.rad2deg(start_err):.2f}° away from the "
                 f"{'last queued target' if following else 'measured joints'} "
@@ -235,18 +283,8 @@ class RobotDriver:
         targets = self._servo_targets(traj, period)
         self.limits.check_all(targets, "trajectory")
         self.limits.check_velocities(targets, period, q_start=q_now)
-        if fb.estop:
-            raise EmergencyStopError("emergency stop is active")
-        if fb.in_error:
-            raise ControllerError("controller is in alarm; clear it before executing a trajectory")
-        async with self._motion_lock:
-            self._abort.clear()
-            if stop_when is not None:
-                return await self._guarded(targets, period, stop_when)
-            res = await self._stream(targets, period, wait_done=not continues)
-            if continues:
-                self._continue_from = targets[-1].copy()
-            return res
+        self.limits.check_accelerations(targets, period, q_before)
+        return targets, q_before
 
     async def _stream(self, targets: np.ndarray, period: float, wait_done: bool = True) -> MoveResult:
         """Send ServoJ targets, keeping at most ``servo_lookahead`` queued ahead of the one the
@@ -261,10 +299,10 @@ class RobotDriver:
         ids: list[int | None] = []
         for k, q in enumerate(targets):
             while True:
-                if self._abort.is_set():
-                    raise ExecutionError(f"trajectory aborted by stop at step {k}/{len(targets)}")
                 fb = self.feedback
-                if fb.estop:
+                if self._abort.is_set() and not (fb.estop or self._abort_by_estop):
+                    raise ExecutionError(f"trajectory aborted by stop at step {k}/{len(targets)}")
+                if fb.estop or self._abort.is_set():
                     raise EmergencyStopError(f"emergency stop during trajectory step {k}")
                 if fb.in_error:
                     alarm_ids, text = await self.client.describe_alarms()

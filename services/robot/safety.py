@@ -16,6 +16,10 @@ from services.common.settings import WorkspaceBounds
 from services.kinematics import analytic
 from services.kinematics.robot_models import RobotSpec
 
+# the streamed samples of a trajectory timed at exactly its limits may read a hair above them (the
+# servo period cuts a jerk-limited profile); 5 % is far below what an unplanned speed step produces
+ACCELERATION_MARGIN = 1.05
+
 
 @dataclass(frozen=True)
 class SafetyLimits:
@@ -70,6 +74,25 @@ class SafetyLimits:
             raise LimitViolationError(
                 f"trajectory step {k}: joint {j + 1} would move at {np.rad2deg(speed[k, j]):.1f}°/s, "
                 f"above its limit {np.rad2deg(vmax[j]):.1f}°/s; not sent"
+            )
+
+    def check_accelerations(self, q_samples: np.ndarray, dt: float, q_before: np.ndarray) -> None:
+        """Joint accelerations implied by the streamed samples stay within the model's limits.
+
+        ``q_before``: the two positions the stream continues from, oldest first (the same one twice when
+        the arm starts at rest), so the first samples are judged against the motion they continue. The
+        second difference of positions sampled every ``dt`` is a weighted mean of the acceleration over
+        two periods, so a trajectory within its limits passes; a step in speed does not."""
+        before = np.asarray(q_before, dtype=float).reshape(2, self.spec.dof)
+        qs = np.vstack([before, np.asarray(q_samples, dtype=float).reshape(-1, self.spec.dof)])
+        acc = np.abs(np.diff(qs, n=2, axis=0)) / dt**2
+        amax = self.spec.max_acceleration * ACCELERATION_MARGIN
+        bad = acc > amax
+        if bad.any():
+            k, j = (int(x[0]) for x in np.nonzero(bad))
+            raise LimitViolationError(
+                f"trajectory step {k}: joint {j + 1} would accelerate at {np.rad2deg(acc[k, j]):.0f}°/s², "
+                f"above its limit {np.rad2deg(self.spec.max_acceleration[j]):.0f}°/s²; not sent"
             )
 
     def check_all(self, q: np.ndarray, what: str = "joint target") -> np.ndarray:

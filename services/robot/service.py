@@ -28,7 +28,7 @@ from services.common.shell import GrpcShell
 from services.kinematics.robot_models import get_robot
 from services.kinematics.tool import tool_frame
 from services.kinematics.trajectory import JointTrajectory
-from services.robot.client import ClientState, DobotClient, FeedbackState
+from services.robot.client import ClientState, DobotClient, FeedbackState, LinkState
 from services.robot.driver import RobotDriver
 from services.robot.messages import joint_state_msg, robot_status_msg
 
@@ -247,7 +247,7 @@ def robot_link_up(client: DobotClient, feedback_timeout_s: float, now_ns: int) -
     """The controller link is up while feedback keeps arriving: the packet stream is the controller's
     heartbeat (8 ms); the client gives up a silent stream after the same five feedback timeouts."""
     fb = client.feedback
-    if client.state is ClientState.CLOSED or fb is None:
+    if client.state is ClientState.CLOSED or client.link is not LinkState.UP or fb is None:
         return False
     return now_ns - fb.received_ns < FEEDBACK_STALE_TIMEOUTS * max(feedback_timeout_s, 0.05) * 1e9
 

@@ -216,3 +216,57 @@ def test_keypose_trajectory_wraps_only_continuous_joints(robot_settings):
     traj = min_jerk_keypose_trajectory(np.vstack([a, b]), 1.0, 0.0, joint_names=NOVA5.joint_names, limits=lim)
     # J1 and J6 have ±360° ranges: 20° the short way, not 340°
     assert np.allclose(np.rad2deg(traj.positions[-1][[0, 5]]), [190, 190])
+
+
+async def test_a_second_trajectory_while_one_streams_is_refused_busy_and_never_streamed(driver, sim_server):
+    # issue 13, finding 1: the check used to run before the lock, against the old position
+    from services.common.errors import RobotBusyError
+
+    goal = np.deg2rad([30, 20, 80, -10, -90, 0])
+    first = quintic_move(
+        driver.joint_positions(), goal, joint_names=driver.spec.joint_names, limits=limits(driver.spec)
+    )
+    second = quintic_move(
+        driver.joint_positions(), HOME, joint_names=driver.spec.joint_names, limits=limits(driver.spec)
+    )
+    running = asyncio.create_task(driver.execute_trajectory(first))
+    while not driver._motion_lock.locked():  # the first stream holds the arm
+        await driver.client.next_feedback()
+    with pytest.raises(RobotBusyError, match="another motion"):
+        await driver.execute_trajectory(second)
+    with pytest.raises(RobotBusyError):
+        await driver.move_joints(HOME)
+    res = await running
+    assert np.allclose(res.final_q, goal, atol=1e-6)  # the first ran to its end, alone
+
+
+async def test_acceleration_beyond_the_limit_is_not_sent(driver, sim_server):
+    # issue 13, finding 2: speeds within the limit, but a jump in speed between two targets
+    q0 = driver.joint_positions()
+    period = driver.settings.robot.servo_period_s
+    v = 0.9 * driver.spec.max_velocity[0]  # rad/s on joint 1, from rest in one period
+    ts = np.arange(0, 40) * period
+    pos = np.tile(q0, (len(ts), 1))
+    pos[:, 0] = q0[0] + v * ts
+    vel = np.zeros_like(pos)
+    vel[:, 0] = v
+    traj = JointTrajectory(driver.spec.joint_names, ts, pos, vel, np.zeros_like(pos))
+    before = sim_server.controller.commands_handled
+    with pytest.raises(LimitViolationError, match="accelerate"):
+        await driver.execute_trajectory(traj)
+    assert sim_server.controller.commands_handled == before
+
+
+async def test_an_estop_during_streaming_is_an_emergency_stop_error(driver):
+    # issue 13, finding 8: it used to surface as "trajectory aborted by stop" (an ExecutionError)
+    goal = np.deg2rad([30, 20, 80, -10, -90, 0])
+    traj = quintic_move(
+        driver.joint_positions(), goal, joint_names=driver.spec.joint_names, limits=limits(driver.spec, 0.2)
+    )
+    running = asyncio.create_task(driver.execute_trajectory(traj))
+    while not driver._motion_lock.locked():
+        await driver.client.next_feedback()
+    await driver.emergency_stop()
+    with pytest.raises(EmergencyStopError):
+        await running
+    await driver.emergency_stop(release=True)
