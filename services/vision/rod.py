@@ -24,6 +24,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
@@ -48,6 +49,12 @@ Array = np.ndarray
 _EDGE_FRACTION = 0.35  # use the middle ±35 % of the region's length for edge lines (away from the caps)
 _MAX_FIT_POINTS = 800
 _FOOTPRINT_CELL_M = 0.004  # table grid for the footprints of tall objects
+# Pieces of one rod: elongated (aspect ≥ 2), at least a third of the rod's minimum area, axes within 8°,
+# centres within half a rod width of each other's axis line.
+_FRAGMENT_MIN_ASPECT = 2.0
+_FRAGMENT_AREA_DIVISOR = 3
+_FRAGMENT_MAX_ANGLE_DEG = 8.0
+_FRAGMENT_MAX_OFFSET = 0.5
 
 
 @dataclass(frozen=True)
@@ -232,47 +239,96 @@ def detect_rods(
 
     rods: list[RodDetection] = []
     min_area = params.min_area_px * resolution_scale(intr) ** 2
-    for k in np.nonzero(areas >= min_area)[0]:
-        if k == 0:
-            continue
-        rows, cols = np.divmod(flat[starts[k - 1] : starts[k]], labels.shape[1])
+    fragments: list[tuple[int, tuple[Array, Array, float, Array], int]] = []  # (label, shape, area)
+
+    def pixels(ks: list[int]) -> tuple[Array, Array]:
+        idx = np.concatenate([flat[starts[k - 1] : starts[k]] for k in ks])
+        return np.divmod(idx, labels.shape[1])
+
+    def try_region(ks: list[int], report: bool) -> tuple[RodDetection | None, bool]:
+        """Fit a rod to the union of these labelled regions: (rod or None, may it be a fragment)."""
+        nonlocal t_pose
+        rows, cols = pixels(ks)
         y0, x0 = int(rows.min()), int(cols.min())
         h, w = int(rows.max()) - y0 + 1, int(cols.max()) - x0 + 1
         crop = (slice(max(y0 - 2, 0), y0 + h + 2), slice(max(x0 - 2, 0), x0 + w + 2))
-        comp = labels[crop] == k
+        comp = np.isin(labels[crop], ks)
         oy, ox = crop[0].start, crop[1].start
         shape = _region_shape(rows, cols)
+        where = f"px ({x0 + w // 2}, {y0 + h // 2})"
         if shape is None or shape[2] < params.min_aspect_ratio:
-            if shape is not None and shape[2] >= 1.8:
+            if report and shape is not None and shape[2] >= 1.8:
                 notes.append(
-                    f"dark region at px ({x0 + w // 2}, {y0 + h // 2}) not elongated enough "
+                    f"dark region at {where} not elongated enough "
                     f"(aspect {shape[2]:.1f} < {params.min_aspect_ratio})"
                 )
-            continue
+            return None, shape is not None and shape[2] >= _FRAGMENT_MIN_ASPECT
         comp_h = heights_at(depth_m, intr, plane, rows, cols)
         comp_valid = np.isfinite(comp_h)
         if np.count_nonzero(comp_valid) >= 10:
             above_frac = float(np.mean((comp_h[comp_valid] > above_thr) & (comp_h[comp_valid] < h_max)))
             if above_frac < params.min_above_fraction:
                 notes.append(
-                    f"dark elongated region at px ({x0 + w // 2}, {y0 + h // 2}) lies flat on the "
-                    f"table ({above_frac:.0%} of it at rod height, {params.min_above_fraction:.0%} needed), "
-                    "not a rod"
+                    f"dark elongated region at {where} lies flat on the table ({above_frac:.0%} of it at "
+                    f"rod height, {params.min_above_fraction:.0%} needed), not a rod"
                 )
-                continue
+                return None, False
         tp = time.perf_counter()
         det, why = _fit_rod(comp, (oy, ox), rows, cols, shape, depth_m, intr, plane, params, r)
         t_pose += time.perf_counter() - tp
-        if det is None:
+        if det is None and report:
             notes.append(why)
+        return det, det is None and "length" in why
+
+    for k in np.nonzero(areas >= min_area / _FRAGMENT_AREA_DIVISOR)[0]:
+        if k == 0:
             continue
-        rods.append(det)
+        whole = areas[k] >= min_area
+        det, fragment = try_region([int(k)], report=whole)
+        if det is not None:
+            rods.append(det)
+        elif fragment:
+            rows, cols = pixels([int(k)])
+            shape = _region_shape(rows, cols)
+            if shape is not None:
+                fragments.append((int(k), shape, int(areas[k])))
+    rods += _merge_fragments(fragments, try_region, rod_width_px(intr, plane, params.diameter_m), notes)
     rods.sort(key=lambda d: d.confidence, reverse=True)
     if len(rods) > params.max_rods:
         notes.append(f"{len(rods)} rods found, reporting the best {params.max_rods}")
         rods = rods[: params.max_rods]
     total = (time.perf_counter() - t0) * 1e3
     return rods, notes, {"rod_segmentation": total - t_pose * 1e3, "rod_pose": t_pose * 1e3}
+
+
+def _merge_fragments(
+    fragments: list[tuple[int, tuple[Array, Array, float, Array], int]],
+    try_region: Callable[[list[int], bool], tuple[RodDetection | None, bool]],
+    width_px: float,
+    notes: list[str],
+) -> list[RodDetection]:
+    """Pieces of one rod (cut by a highlight or an occluder across it) that lie on one line and fit
+    one cylinder together: largest pairs first, each piece used once."""
+    found: list[RodDetection] = []
+    used: set[int] = set()
+    order = sorted(range(len(fragments)), key=lambda i: -fragments[i][2])
+    for ia, i in enumerate(order):
+        for j in order[ia + 1 :]:
+            (ka, sa, _), (kb, sb, _) = fragments[i], fragments[j]
+            if ka in used or kb in used:
+                continue
+            if abs(float(sa[0] @ sb[0])) < np.cos(np.radians(_FRAGMENT_MAX_ANGLE_DEG)):
+                continue
+            d = sb[3] - sa[3]
+            off = max(abs(float(d @ sa[1])), abs(float(d @ sb[1])))  # across either piece's axis
+            if off > _FRAGMENT_MAX_OFFSET * width_px:
+                continue
+            det, _ = try_region([ka, kb], False)
+            if det is not None:
+                used |= {ka, kb}
+                found.append(det)
+                notes.append(f"rod found from two collinear pieces ({ka}, {kb}) fitted as one cylinder")
+    return found
 
 
 def _region_shape(rows: Array, cols: Array) -> tuple[Array, Array, float, Array] | None:
@@ -298,7 +354,8 @@ def _edge_planes(
     contours, _ = cv2.findContours(comp.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     if not contours:
         return None
-    contour = max(contours, key=len).reshape(-1, 2).astype(float) + [offset[1], offset[0]]
+    # every outer contour: a rod merged from two pieces has one per piece
+    contour = np.concatenate([c.reshape(-1, 2) for c in contours]).astype(float) + [offset[1], offset[0]]
     e, f, _, c = shape
     a = (contour - c) @ e
     b = (contour - c) @ f

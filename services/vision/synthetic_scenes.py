@@ -175,6 +175,7 @@ def _place_objects(
 # --- the hard scene set (issue 15) -----------------------------------------------------------------
 HARD_OBSTACLE_COLORS = ("grey", "white", "black", "blue")
 HARD_CUBE_COLORS = ("red", "green", "blue", "black", "yellow")
+ROBOT_BASE_CLEAR_M = 0.16  # vision's robot_base_radius_m (0.13) plus a margin: nothing stands there
 MAX_CUT_CUBE_DEPTH_M = 1.3  # a cube cut by the image edge still lies in vision's depth range (≤ 1.5 m)
 
 
@@ -293,6 +294,10 @@ def _hard_layout(
         ins = (uv[:, 0] >= 0) & (uv[:, 0] < intr.width) & (uv[:, 1] >= 0) & (uv[:, 1] < intr.height)
         return 3 <= int(np.count_nonzero(ins)) <= 6
 
+    def off_robot(corners: Array) -> bool:
+        """Clear of the arm's own base (vision leaves that cylinder out: it is the robot)."""
+        return bool(np.all(np.hypot(corners[:, 0], corners[:, 1]) >= ROBOT_BASE_CLEAR_M))
+
     def free(xy: Array, radius: float) -> bool:
         return all(np.linalg.norm(xy - q) >= radius + rq + 0.04 for q, rq in placed)
 
@@ -305,7 +310,7 @@ def _hard_layout(
             xy = target[:2] + rng.uniform(-0.6 * spread, 0.6 * spread, 2)
             rod = RodSpec((xy[0], xy[1], r), rng.uniform(-np.pi, np.pi), L, r)
             ends = np.array([rod.center + s * rod.axis * L / 2 for s in (-1, 1)])
-            if inside(np.concatenate([ends + [0, 0, r], ends - [0, 0, r]])):
+            if off_robot(ends) and inside(np.concatenate([ends + [0, 0, r], ends - [0, 0, r]])):
                 rods.append(rod)
                 placed.append((xy, L / 2))
                 break
@@ -324,7 +329,7 @@ def _hard_layout(
             xy = target[:2] + rng.uniform(-spread, spread, 2) * 0.6
             yaw = rng.uniform(-np.pi, np.pi)
         box = BoxSpec((xy[0], xy[1], size[2] / 2), size, yaw, "black")
-        if inside(box.corners()):
+        if off_robot(box.corners()) and inside(box.corners()):
             boxes.append(box)
             placed.append((xy, 0.0))  # its gap to the rod is set on purpose
             gap = g if rods else None
@@ -338,7 +343,7 @@ def _hard_layout(
             if not free(xy, rad):
                 continue
             box = BoxSpec((xy[0], xy[1], size[2] / 2), size, rng.uniform(-np.pi, np.pi), colour)
-            if inside(box.corners()):
+            if off_robot(box.corners()) and inside(box.corners()):
                 obstacle_idx.append(len(boxes))
                 boxes.append(box)
                 placed.append((xy, rad))
@@ -354,7 +359,7 @@ def _hard_layout(
             if not free(xy, 0.75 * s):
                 continue
             box = BoxSpec((xy[0], xy[1], s / 2), (s, s, s), rng.uniform(-np.pi, np.pi), colour)
-            if straddles(box.corners()) if cut else inside(box.corners()):
+            if off_robot(box.corners()) and (straddles(box.corners()) if cut else inside(box.corners())):
                 if cut:
                     cut_idx.append(len(boxes))
                 boxes.append(box)

@@ -120,3 +120,32 @@ def test_black_cube_beside_the_rod_is_told_apart_by_geometry():
     assert len(result.rods) == 1, result.notes
     centre = np.linalg.norm(result.rods[0].center_base - np.asarray(rod.center))
     assert centre < 0.002 and result.rods[0].length_m == pytest.approx(0.2, abs=0.006)
+
+
+def test_rod_cut_across_by_a_band_is_merged_from_its_collinear_pieces():
+    """A band across the middle where the table shows through (colour and depth) leaves two 90 mm pieces."""
+    cam = look_at_camera(np.array([0.45, 0.0, 0.0]), 0.75, 60.0, 0.0)
+    rod = RodSpec(center=(0.45, 0.0, 0.011), yaw=0.5)
+    scene = SyntheticScene(T_base_camera=cam, intrinsics=d435_intrinsics(), rods=(rod,))
+    rendered = render_scene(scene, NoiseModel(), seed=5)
+    color, depth = rendered.frame.color.copy(), rendered.frame.depth.copy()
+    rows, cols = np.nonzero(rendered.labels == 10)
+    centre = np.array([cols.mean(), rows.mean()])
+    axis = np.linalg.eigh(np.cov(np.vstack([cols, rows])))[1][:, 1]
+    yy, xx = np.mgrid[0 : color.shape[0], 0 : color.shape[1]]
+    band = np.abs((xx - centre[0]) * axis[0] + (yy - centre[1]) * axis[1]) < 12  # 24 px across the rod
+    band &= rendered.labels == 10
+    intr = rendered.frame.intrinsics
+    rays = np.column_stack(
+        [(xx[band] - intr.cx) / intr.fx, (yy[band] - intr.cy) / intr.fy, np.ones(band.sum())]
+    )
+    z_table = -cam[2, 3] / (rays @ cam[2, :3])  # where each ray meets the table top z = 0
+    color[band] = (196, 186, 166)
+    depth[band] = np.rint(z_table * 1000).astype(np.uint16)
+    frame = replace(rendered.frame, color=color, depth=depth)
+    result = VisionPipeline(VisionSettings(detect_cubes=False)).detect(frame, cam)
+    assert len(result.rods) == 1, result.notes
+    assert any("collinear pieces" in n for n in result.notes)
+    det = result.rods[0]
+    assert np.linalg.norm(det.center_base - np.asarray(rod.center)) < 0.003
+    assert det.length_m == pytest.approx(0.2, abs=0.01)
