@@ -123,14 +123,14 @@ class GraspPlannerServicer(grasp_pb2_grpc.GraspPlannerServicer):
             cfg = self.cfg
             if request.HasField("grasp_offset"):
                 try:
-                    rod_cfg = RodStandSettings.model_validate(
+                    stand_cfg = RodStandSettings.model_validate(
                         {**cfg.rod.model_dump(), "grasp_offset_m": request.grasp_offset}
                     )
                 except ValidationError as exc:
                     raise InvalidInputError(
                         f"grasp_offset {request.grasp_offset} m: {exc.errors()[0]['msg']}"
                     ) from exc
-                cfg = cfg.model_copy(update={"rod": rod_cfg})
+                cfg = cfg.model_copy(update={"rod": stand_cfg})
             plan = plan_pick_and_stand(
                 self.spec,
                 rod,

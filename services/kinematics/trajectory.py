@@ -16,12 +16,16 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from services.common.errors import InvalidInputError, TrajectoryLimitError
 from services.kinematics.robot_models import RobotSpec
+
+if TYPE_CHECKING:
+    from pickplace.v1 import common_pb2
 
 Array = NDArray[np.float64]
 
@@ -290,7 +294,7 @@ class JointTrajectory:
         )
 
     # --- protobuf (pickplace.v1.JointTrajectory) ---------------------------------------------
-    def to_proto(self) -> object:
+    def to_proto(self) -> common_pb2.JointTrajectory:
         from pickplace.v1 import common_pb2
 
         msg = common_pb2.JointTrajectory(joint_names=list(self.joint_names))

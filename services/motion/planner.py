@@ -437,12 +437,12 @@ class BlendPart:
 def _common_limits(parts: Sequence[BlendPart]) -> JointLimits:
     """The tightest of the parts' limits: the slowest move of the run bounds the whole blend."""
     lims = [p.planner.line_limits if any(q.line for q in parts) else p.planner.limits for p in parts]
-    jerks = [lim.max_jerk for lim in lims]
+    jerks = [lim.max_jerk for lim in lims if lim.max_jerk is not None]
     return dataclasses.replace(
         lims[0],
         max_velocity=np.min([lim.max_velocity for lim in lims], axis=0),
         max_acceleration=np.min([lim.max_acceleration for lim in lims], axis=0),
-        max_jerk=None if any(j is None for j in jerks) else np.min(jerks, axis=0),
+        max_jerk=np.min(jerks, axis=0) if len(jerks) == len(lims) else None,
     )
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import TypeVar
 
 import grpc
@@ -51,8 +51,8 @@ ALREADY_THERE_RAD = 1e-9
 # --- proto ↔ core ---------------------------------------------------------------------------------
 
 
-def _joints(values: object, name: str) -> Array:
-    arr = np.asarray(list(values), dtype=float)  # type: ignore[call-overload]
+def _joints(values: Iterable[float], name: str) -> Array:
+    arr = np.asarray(list(values), dtype=np.float64)
     if arr.size == 0:
         raise InvalidInputError(f"{name} is empty")
     return arr
@@ -82,7 +82,7 @@ def scene_from_proto(msg: motion_pb2.PlanningScene, motion: MotionSettings) -> S
             length=a.length or 0.2,
             size=size,  # type: ignore[arg-type]
             T_tool_object=tuple(map(tuple, T_tool_object)),
-        )  # type: ignore[arg-type]
+        )
     table_z = None if msg.no_table else (msg.table_z if msg.HasField("table_z") else motion.table_z_m)
     return Scene(
         boxes=tuple(boxes),
@@ -260,7 +260,7 @@ class MotionPlannerServicer(motion_pb2_grpc.MotionPlannerServicer):
             for piece in pieces:
                 whole = whole.append(piece) if len(piece) > 1 else whole
             resp = plan_response(Plan(whole, np.vstack(paths), "+".join(used), planning_s, timing_s, notes))
-            resp.segments.extend(piece.to_proto() for piece in pieces)  # type: ignore[misc]
+            resp.segments.extend(piece.to_proto() for piece in pieces)
             return resp
 
         return await self._run("PlanWaypoints", work)

@@ -283,7 +283,7 @@ class GrpcRobot:
         self, traj: JointTrajectory, force_guard_n: float = 0.0, continues: bool = False
     ) -> MoveOutcome:
         req = robot_pb2.ExecuteTrajectoryRequest(
-            trajectory=traj.to_proto(),  # type: ignore[arg-type]
+            trajectory=traj.to_proto(),
             continues=continues,
         )
         if force_guard_n > 0:

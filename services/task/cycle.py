@@ -409,11 +409,11 @@ class Orchestrator:
                 # two-stage: fast down to the band above the nominal contact, slow through it
                 along = np.asarray(w.guard_direction, dtype=float)
                 band_from = float(np.dot(w.T_base_tool[:3, 3] - p0, along)) - w.guard_slow_band_m
-                dist = [
+                along_line = [
                     float(np.dot((await self.motion.tool_pose(q))[:3, 3] - p0, along)) for q in traj.positions
                 ]
                 return paced_on_line(
-                    traj, np.asarray(dist), w.guard_approach_speed_m_s, w.guard_speed_m_s, band_from
+                    traj, np.asarray(along_line), w.guard_approach_speed_m_s, w.guard_speed_m_s, band_from
                 )
             # a guarded approach goes no faster than the grasp plan's touch-down speed
             dist = float(np.linalg.norm(move.target[:3, 3] - p0))
