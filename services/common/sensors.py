@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
@@ -158,3 +160,25 @@ async def publish_camera_frames(
             async with asyncio.timeout(max(0.0, period - (time.monotonic() - t0))):
                 await stop.wait()
     return n
+
+
+def write_intrinsics(directory: Path, intr: CameraIntrinsics, depth_scale: float) -> Path:
+    """``intrinsics.json`` of a recorded frame set (the replay camera and the twin's datasets write it)."""
+    path = directory / "intrinsics.json"
+    path.write_text(
+        json.dumps(
+            {
+                "width": intr.width,
+                "height": intr.height,
+                "fx": intr.fx,
+                "fy": intr.fy,
+                "cx": intr.cx,
+                "cy": intr.cy,
+                "distortion": list(intr.distortion),
+                "depth_scale": depth_scale,
+                "model": "pinhole",
+            },
+            indent=2,
+        )
+    )
+    return path

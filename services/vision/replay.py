@@ -21,30 +21,9 @@ import cv2
 import numpy as np
 
 from services.common.errors import CameraConnectionError, InvalidInputError
-from services.common.sensors import Camera, CameraIntrinsics, RGBDFrame
+from services.common.sensors import Camera, CameraIntrinsics, RGBDFrame, write_intrinsics
 
 _INDEX = re.compile(r"^(color|depth)_(\d+)\.png$")
-
-
-def write_intrinsics(directory: Path, intr: CameraIntrinsics, depth_scale: float) -> Path:
-    path = directory / "intrinsics.json"
-    path.write_text(
-        json.dumps(
-            {
-                "width": intr.width,
-                "height": intr.height,
-                "fx": intr.fx,
-                "fy": intr.fy,
-                "cx": intr.cx,
-                "cy": intr.cy,
-                "distortion": list(intr.distortion),
-                "depth_scale": depth_scale,
-                "model": "pinhole",
-            },
-            indent=2,
-        )
-    )
-    return path
 
 
 def read_intrinsics(directory: Path) -> tuple[CameraIntrinsics, float]:

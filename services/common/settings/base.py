@@ -34,5 +34,12 @@ Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
 CubeColor = Literal["red", "blue", "green", "black"]
 ALL_CUBE_COLORS: tuple[CubeColor, ...] = ("red", "blue", "green", "black")
+# seed 004's colour-keyed drop zones (base frame, m): where grasp puts the cubes and the twin marks them
+DEFAULT_DROP_ZONES_M: dict[str, tuple[float, float]] = {
+    "red": (0.30, 0.45),
+    "blue": (0.45, 0.45),
+    "green": (0.30, -0.45),
+    "black": (0.45, -0.45),
+}
 
 Vec6 = tuple[float, float, float, float, float, float]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pydantic import Field, model_validator
 
-from services.common.settings.base import Model, Vec2, Vec6
+from services.common.settings.base import DEFAULT_DROP_ZONES_M, Model, Vec2, Vec6
 
 
 class GraspGripperSettings(Model):
@@ -95,14 +95,7 @@ class RodStandSettings(Model):
 class CubeSortSettings(Model):
     """Seed 004: cubes go to colour-keyed drop zones (base frame, table top at z = 0)."""
 
-    drop_zones_m: dict[str, Vec2] = Field(
-        default_factory=lambda: {
-            "red": (0.30, 0.45),
-            "blue": (0.45, 0.45),
-            "green": (0.30, -0.45),
-            "black": (0.45, -0.45),
-        }
-    )
+    drop_zones_m: dict[str, Vec2] = Field(default_factory=lambda: dict(DEFAULT_DROP_ZONES_M))
     transport_height_m: float = Field(
         0.25, gt=0, le=1.0, description="tool tip while carrying (over obstacles)"
     )

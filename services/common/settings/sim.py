@@ -6,7 +6,15 @@ from typing import Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from services.common.settings.base import ALL_CUBE_COLORS, CubeColor, Model, Vec2, Vec3, is_loopback
+from services.common.settings.base import (
+    ALL_CUBE_COLORS,
+    DEFAULT_DROP_ZONES_M,
+    CubeColor,
+    Model,
+    Vec2,
+    Vec3,
+    is_loopback,
+)
 
 
 class TwinPhysicsSettings(Model):
@@ -84,14 +92,7 @@ class TwinSceneSettings(Model):
     cube_size_m: float = Field(0.05, gt=0.01, le=0.08)
     cube_mass_kg: float = Field(0.075, gt=0, le=2)
     min_gap_m: float = Field(0.04, ge=0, le=0.3, description="clearance between objects for the fingers")
-    drop_zones_m: dict[str, Vec2] = Field(
-        default_factory=lambda: {
-            "red": (0.30, 0.45),
-            "blue": (0.45, 0.45),
-            "green": (0.30, -0.45),
-            "black": (0.45, -0.45),
-        }
-    )
+    drop_zones_m: dict[str, Vec2] = Field(default_factory=lambda: dict(DEFAULT_DROP_ZONES_M))
     rod_place_m: Vec2 = (0.45, 0.0)
     obstacle: bool = True
     # A wall between the pick zone and the red/blue drop zones (seed 004: plan over it, not around).

@@ -24,7 +24,7 @@ import numpy as np
 
 from services.common.errors import InvalidInputError
 from services.common.frames import invert_transform, make_transform
-from services.common.sensors import CameraIntrinsics, RGBDFrame
+from services.common.sensors import CameraIntrinsics, RGBDFrame, write_intrinsics
 from services.common.settings import Settings, load_settings
 from services.sim.twin import ground_truth as gt
 from services.sim.twin.camera import DEPTH_SCALE, TwinCamera
@@ -168,23 +168,7 @@ def write_sim_scene(
             _write_png(out / names["labels"], label_image(engine, views.geom_id))
             records.append({**names, "stamp_ns": frame.stamp_ns, "noise": camera.noise})
         truth["frames"] = records
-        intr = camera.intrinsics
-        (out / "intrinsics.json").write_text(
-            json.dumps(
-                {
-                    "width": intr.width,
-                    "height": intr.height,
-                    "fx": intr.fx,
-                    "fy": intr.fy,
-                    "cx": intr.cx,
-                    "cy": intr.cy,
-                    "distortion": list(intr.distortion),
-                    "depth_scale": DEPTH_SCALE,
-                    "model": "pinhole",
-                },
-                indent=2,
-            )
-        )
+        write_intrinsics(out, camera.intrinsics, DEPTH_SCALE)
         path = out / "ground_truth.json"
         path.write_text(json.dumps(truth, indent=2))
         return path
