@@ -172,12 +172,19 @@ class RobotDriver:
         raise TrajectoryExecutionError(f"{what} failed after {retries + 1} attempts: {last}") from last
 
     async def move_joints(
-        self, q_goal: np.ndarray, speed_ratio: int | None = None, linear: bool = False
+        self,
+        q_goal: np.ndarray,
+        speed_ratio: int | None = None,
+        linear: bool = False,
+        acceleration_ratio: int | None = None,
     ) -> MoveResult:
         q_goal = self.limits.check_all(np.asarray(q_goal, dtype=float))
         v = None if speed_ratio is None else int(speed_ratio)
         if v is not None and not 1 <= v <= 100:
             raise InvalidInputError(f"speed_ratio must be 1-100, got {v}")
+        a = None if acceleration_ratio is None else int(acceleration_ratio)
+        if a is not None and not 1 <= a <= 100:
+            raise InvalidInputError(f"acceleration ratio must be 1-100, got {a}")
         self._refuse_if_busy("MoveJoints")
         async with self._motion_lock:
             self._abort.clear()
@@ -186,9 +193,9 @@ class RobotDriver:
 
             async def step() -> FeedbackState:
                 if linear:
-                    rid = await self.client.mov_l(q_goal, v=v)
+                    rid = await self.client.mov_l(q_goal, a=a, v=v)
                 else:
-                    rid = await self.client.mov_j(q_goal, v=v)
+                    rid = await self.client.mov_j(q_goal, a=a, v=v)
                 return await self.client.wait_motion_done(rid, self.settings.robot.motion_timeout_s)
 
             fb, attempts = await self._with_retries("MoveJoints", step)

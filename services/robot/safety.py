@@ -7,6 +7,7 @@ LimitViolationError naming the joint / sample / coordinate — nothing is sent.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -99,3 +100,32 @@ class SafetyLimits:
         q = self.check_joints(q, what)
         self.check_workspace(q, what)
         return q
+
+
+def speed_ratio_field(value: float, name: str = "speed_ratio") -> int | None:
+    """A requested speed ratio (1-100 %; 0 = the configured default) as the controller's integer ratio."""
+    if not math.isfinite(value):
+        raise InvalidInputError(f"{name} must be a finite percentage, got {value}")
+    if value == 0:
+        return None
+    if not 1 <= value <= 100:
+        raise InvalidInputError(f"{name} must be 1-100 %, got {value:g}")
+    return round(value)
+
+
+def cap_ratio(cap: float, limits: np.ndarray, name: str, unit: str) -> int | None:
+    """The controller ratio (1-100 %) that keeps every joint at or under ``cap`` (``unit``); None for 0.
+
+    A ratio scales each joint's own limit, so the fastest joint decides. A cap below 1 % of it cannot be
+    honoured and is refused, never ignored."""
+    if not math.isfinite(cap) or cap < 0:
+        raise InvalidInputError(f"{name} must be a finite value >= 0 {unit}, got {cap}")
+    if cap == 0:
+        return None
+    fastest = float(np.max(limits))
+    ratio = math.floor(100.0 * cap / fastest + 1e-9)
+    if ratio < 1:
+        raise InvalidInputError(
+            f"{name} {cap:g} {unit} is below the slowest the controller moves (1 % = {fastest / 100:.4g} {unit})"
+        )
+    return min(ratio, 100)

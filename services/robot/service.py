@@ -31,6 +31,7 @@ from services.kinematics.trajectory import JointTrajectory
 from services.robot.client import ClientState, DobotClient, FeedbackState, LinkState
 from services.robot.driver import RobotDriver
 from services.robot.messages import joint_state_msg, robot_status_msg
+from services.robot.safety import cap_ratio, speed_ratio_field
 
 log = logging.getLogger("pickplace.robot.service")
 
@@ -100,8 +101,20 @@ class RobotControllerServicer(robot_pb2_grpc.RobotControllerServicer):
         self, request: robot_pb2.MoveJointsRequest, context: grpc.aio.ServicerContext
     ) -> robot_pb2.MoveResponse:
         q = finite_vector(list(request.positions), self.driver.spec.dof, "positions")
-        ratio = int(request.speed_ratio) if request.speed_ratio else None
-        res = await self.driver.move_joints(q, ratio, linear=request.linear)
+        spec = self.driver.spec
+        # every field is honoured or refused, never ignored: the caps become the controller's ratios
+        ratios = [
+            r
+            for r in (
+                speed_ratio_field(request.speed_ratio),
+                cap_ratio(request.max_velocity, spec.max_velocity, "max_velocity", "rad/s"),
+            )
+            if r is not None
+        ]
+        acc = cap_ratio(request.max_acceleration, spec.max_acceleration, "max_acceleration", "rad/s²")
+        res = await self.driver.move_joints(
+            q, min(ratios) if ratios else None, linear=request.linear, acceleration_ratio=acc
+        )
         return robot_pb2.MoveResponse(
             success=True,
             message=f"reached in {res.attempts} attempt(s)",

@@ -158,3 +158,27 @@ async def test_health_follows_the_robot_link(service):
     await client.close()  # the link goes down under the running service
     with pytest.raises(RobotCommunicationError, match="NOT_SERVING: running, robot controller DOWN"):
         await check_health("127.0.0.1", service.grpc_port, "robot")
+
+
+async def test_move_request_fields_are_honoured_or_refused_never_ignored(stub, sim_server):
+    # issue 13, finding 6: max_velocity / max_acceleration were never read; a NaN ratio was INTERNAL
+    target = list(np.deg2rad([10, 5, 85, 0, -90, 10]))
+    for fields, named in (
+        ({"speed_ratio": float("nan")}, "speed_ratio"),
+        ({"speed_ratio": 150.0}, "speed_ratio"),
+        ({"max_velocity": 1e-4}, "max_velocity"),
+        ({"max_velocity": float("inf")}, "max_velocity"),
+        ({"max_acceleration": -1.0}, "max_acceleration"),
+    ):
+        with pytest.raises(grpc.aio.AioRpcError) as info:
+            await stub.MoveJoints(robot_pb2.MoveJointsRequest(positions=target, **fields))
+        assert info.value.code() == grpc.StatusCode.INVALID_ARGUMENT and named in info.value.details()
+    # a velocity cap of a fifth of the fastest joint's limit reaches the controller as its ratio
+    spec_fastest = float(np.max(np.deg2rad([120, 120, 120, 180, 180, 180])))
+    before = len(sim_server.controller.command_log)
+    r = await stub.MoveJoints(
+        robot_pb2.MoveJointsRequest(positions=target, max_velocity=0.2 * spec_fastest, max_acceleration=1.0)
+    )
+    assert r.success
+    sent = [text for _, text in list(sim_server.controller.command_log)[before:] if text.startswith("MovJ")]
+    assert sent and "v=20" in sent[-1].replace(" ", "") and "a=" in sent[-1], sent
