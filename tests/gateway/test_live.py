@@ -71,7 +71,9 @@ async def test_websocket_streams_decimated_joints_status_and_picks(
     assert len(joints) >= 10, f"only {len(joints)} joint states in {elapsed:.1f}s"
     assert all(g > 0 for g in gaps_ms), gaps_ms
     assert 40.0 <= statistics.median(gaps_ms) <= 80.0, gaps_ms
-    assert len(stamps) <= (stamps[-1] - stamps[0]) / 50e6 + 1
+    # at most one state per 50 ms slot of the hub's schedule, which began before this connection's first
+    # state: that one may sit anywhere in its slot, so the span covers at least len - 2 whole slots
+    assert len(stamps) < (stamps[-1] - stamps[0]) / 50e6 + 2
     assert joints[-1]["name"][0] == "joint1" and abs(joints[-1]["position"][2] - 1.5707963) < 1e-5
     assert others["task_status"][-1]["state"] == "PLAN"
     got = [p for batch in others["picks"] for p in batch]
