@@ -156,12 +156,7 @@ class SimDobotServer(ServiceShell):
             self._thread = None
 
     async def _close_listeners(self) -> None:
-        for srv in self._servers.values():
-            srv.close()
-        self.drop_clients()
-        for srv in self._servers.values():
-            with contextlib.suppress(Exception):
-                await asyncio.wait_for(srv.wait_closed(), 2.0)
+        await self.cut_link()
         self._servers.clear()
         self._loop = None
 
