@@ -33,8 +33,9 @@ from services.dobot import RobotMode
 from services.kinematics import analytic
 from services.kinematics.robot_models import RobotSpec
 from services.kinematics.trajectory import JointTrajectory
-from services.robot.client import DobotClient, FeedbackState, LinkState
+from services.robot.client import FeedbackState, LinkState
 from services.robot.gripper import DigitalOutputGripper, GripperState
+from services.robot.link import ControllerLink
 from services.robot.safety import SafetyLimits
 
 log = logging.getLogger("pickplace.robot.driver")
@@ -61,7 +62,7 @@ StopCondition = Callable[[FeedbackState], bool]
 class RobotDriver:
     def __init__(
         self,
-        client: DobotClient,
+        client: ControllerLink,
         spec: RobotSpec,
         settings: Settings,
         T_flange_tool: np.ndarray | None = None,

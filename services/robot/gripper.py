@@ -7,7 +7,7 @@ from typing import Protocol
 
 from services.common.errors import GripperError, RobotCommunicationError
 from services.common.settings import GripperSettings
-from services.robot.client import DobotClient
+from services.robot.link import ControllerLink
 
 
 @dataclass(frozen=True)
@@ -39,7 +39,7 @@ class DigitalOutputGripper:
     ``actuation_time_s``; an open after ``actuation_time_s``. An open of jaws this gripper has
     already opened sends nothing."""
 
-    def __init__(self, client: DobotClient, settings: GripperSettings, command_timeout_s: float = 10.0):
+    def __init__(self, client: ControllerLink, settings: GripperSettings, command_timeout_s: float = 10.0):
         self._client = client
         self._s = settings
         self._closed = False

@@ -30,6 +30,7 @@ from services.kinematics.tool import tool_frame
 from services.kinematics.trajectory import JointTrajectory
 from services.robot.client import ClientState, DobotClient, FeedbackState, LinkState
 from services.robot.driver import RobotDriver
+from services.robot.link import ControllerLink
 from services.robot.messages import joint_state_msg, robot_status_msg
 from services.robot.safety import cap_ratio, speed_ratio_field
 
@@ -256,7 +257,7 @@ def build_driver(settings: Settings) -> RobotDriver:
     return RobotDriver(client, get_robot(r.model), settings, tool_frame(settings))
 
 
-def robot_link_up(client: DobotClient, feedback_timeout_s: float, now_ns: int) -> bool:
+def robot_link_up(client: ControllerLink, feedback_timeout_s: float, now_ns: int) -> bool:
     """The controller link is up while feedback keeps arriving: the packet stream is the controller's
     heartbeat (8 ms); the client gives up a silent stream after the same five feedback timeouts."""
     fb = client.feedback
