@@ -33,26 +33,38 @@ from services.common.errors import (
     RobotError,
     SafetyError,
 )
-from services.common.frames import matrix_to_quat_xyzw
 from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.kinematics.trajectory import JointTrajectory
+from services.task.moves import (
+    blends,
+    box_around,
+    ends_in_motion,
+    is_last_of,
+    move_to,
+    object_id,
+    placed_box,
+    pose_list,
+    raised,
+    run_end,
+    starts_in_motion,
+    with_way_home,
+)
 from services.task.pacing import paced_on_line
 from services.task.placement import free_place_xy, place_candidates
 from services.task.plan import state_for
+from services.task.planned import PlannedPick, Progress
 from services.task.ports import (
     GraspPlan,
     GraspPort,
-    GripOutcome,
     MotionPort,
     Move,
-    MoveOutcome,
     Observation,
     PlannedWaypoint,
     RobotPort,
     SeenBox,
-    SeenRod,
     VisionPort,
 )
+from services.task.recording import RecordingRobot
 from services.task.recovery import Action, Attempts, RetryLimits, decide
 from services.task.states import CycleState, PickOutcome, StateDeadlines
 
@@ -80,51 +92,6 @@ class CycleConfig:
 
 class CycleAborted(Exception):
     """The cycle gave up; the outcome says why."""
-
-
-@dataclass
-class PlannedPick:
-    """A grasp plan with a trajectory per waypoint (None: no motion) and the scene it was planned in."""
-
-    plan: GraspPlan
-    trajs: list[JointTrajectory | None]
-    obstacles: tuple[SeenBox, ...]
-    # the motions from waypoint ``rest_from`` on, still being planned while the arm makes the first ones
-    rest: asyncio.Task[list[JointTrajectory | None]] | None = None
-    rest_from: int = 0
-
-    async def settle(self, seconds: float) -> None:
-        """Wait for the rest of the motions (PlanningError / RobotError as planning raised them)."""
-        if self.rest is None:
-            return
-        task, self.rest = self.rest, None
-        try:
-            async with asyncio.timeout(seconds):
-                rest = await task
-        except TimeoutError:
-            raise PlanningError(
-                f"planning the moves from waypoint {self.rest_from} took over {seconds:.0f} s"
-            ) from None
-        for i in range(self.rest_from, len(self.trajs)):
-            self.trajs[i] = rest[i]
-
-    def plan_rest(self, first: int, planning: Awaitable[list[JointTrajectory | None]]) -> None:
-        """Plan the motions from waypoint ``first`` on in the background."""
-        self.cancel()
-        self.rest, self.rest_from = asyncio.ensure_future(planning), first
-
-    def cancel(self) -> None:
-        if self.rest is not None:
-            self.rest.cancel()
-            self.rest = None
-
-
-@dataclass(frozen=True)
-class Progress:
-    """How far execution got: the waypoint under way, and whether the arm had reached it."""
-
-    index: int = 0
-    reached: bool = False
 
 
 class Orchestrator:
@@ -193,7 +160,7 @@ class Orchestrator:
         out = PickOutcome(pick_id=uuid.uuid4().hex, task=task, object_class=task.object_class)
         self._outcome = out
         self._stage_t0 = None  # what happened since the last cycle belongs to no state of this one
-        robot, self.robot = self.robot, cast(RobotPort, _RecordingRobot(self.robot, out))
+        robot, self.robot = self.robot, cast(RobotPort, RecordingRobot(self.robot, out))
         attempts = Attempts()
         self._enter(CycleState.INIT)
         try:
@@ -326,11 +293,11 @@ class Orchestrator:
         obstacles = (
             obs.obstacles
             + tuple(
-                _box_around(c.centroid, c.size / 2 + OBJECT_MARGIN_M)
+                box_around(c.centroid, c.size / 2 + OBJECT_MARGIN_M)
                 for c in obs.cubes
                 if c is not target_cube
             )
-            + tuple(_box_around(r.center, r.length / 2 + OBJECT_MARGIN_M) for r in obs.rods[1:])
+            + tuple(box_around(r.center, r.length / 2 + OBJECT_MARGIN_M) for r in obs.rods[1:])
         )
         if task is TaskKind.STAND_ROD:
             rod = obs.rods[0]
@@ -353,7 +320,7 @@ class Orchestrator:
             offsets = self.config.grasp_offsets_m
             offset = offsets[alternative % len(offsets)]
             plan = await self.grasp.plan_rod(rod, q, obstacles, alternative // len(offsets), place, offset)
-            out.object_id = _object_id(rod)
+            out.object_id = object_id(rod)
         else:
             cube = obs.cubes[0]
             plan = await self.grasp.plan_cube(cube, q, obstacles, alternative)
@@ -361,13 +328,15 @@ class Orchestrator:
             out.object_id = f"cube@{cube.centroid[0]:.3f},{cube.centroid[1]:.3f}"
         out.grasp_quality = plan.quality
         grasp_wp = next((w for w in plan.waypoints if w.gripper is GripperCommand.CLOSE), plan.waypoints[0])
-        out.pick_pose = _pose_list(grasp_wp.T_base_tool)
+        out.pick_pose = pose_list(grasp_wp.T_base_tool)
         out.place_pose = [*map(float, plan.place_position), 0.0, 0.0, 0.0, 1.0]
-        plan = _with_way_home(plan)
+        plan = with_way_home(plan)
         # the arm sets off as soon as the moves to its first stop are planned; the rest up to the
         # touch-down plans meanwhile (and what follows a touch-down plans from where it touched)
         n = len(plan.waypoints)
-        first_stop = next((i for i in range(n) if _move(plan, i) is not None and not _blends(plan, i)), n - 1)
+        first_stop = next(
+            (i for i in range(n) if move_to(plan, i) is not None and not blends(plan, i)), n - 1
+        )
         trajs = await self._motions(plan, range(first_stop + 1), q, obstacles)
         planned = PlannedPick(plan, trajs, obstacles, rest_from=n)
         if first_stop + 1 < n:
@@ -385,9 +354,9 @@ class Orchestrator:
     ) -> list[JointTrajectory | None]:
         """The trajectories to the waypoints ``indices`` (None elsewhere) from ``start``, planned in one
         request; a guarded approach is slowed to the grasp plan's touch-down speed."""
-        moves = {i: m for i in indices if (m := _move(plan, i)) is not None}
+        moves = {i: m for i in indices if (m := move_to(plan, i)) is not None}
         last = max(moves, default=-1)
-        moves = {i: replace(m, blend=i != last and _blends(plan, i)) for i, m in moves.items()}
+        moves = {i: replace(m, blend=i != last and blends(plan, i)) for i, m in moves.items()}
         planned = await self.motion.plan_moves(start, list(moves.values()), obstacles)
         if len(planned) != len(moves):
             raise PlanningError(f"the motion planner answered {len(planned)} of {len(moves)} moves")
@@ -430,7 +399,7 @@ class Orchestrator:
         q_known: np.ndarray | None = None  # where the last move ended (no round trip for the joints)
         in_motion = False  # the last trajectory ends in motion: this one continues it
         for i in range(resume.index, len(plan.waypoints)):
-            if i >= planned.rest_from and _move(plan, i) is not None:
+            if i >= planned.rest_from and move_to(plan, i) is not None:
                 await planned.settle(cfg.deadlines.plan_s)
             w, traj = plan.waypoints[i], planned.trajs[i]
             self._progress = Progress(i, reached=i == resume.index and resume.reached)
@@ -440,14 +409,14 @@ class Orchestrator:
             if traj is not None and not self._progress.reached and not in_motion:
                 # the arm is at rest: jaws that open at a waypoint it will pass without stopping open now
                 await self._open_ahead(planned, i)
-            continues = traj is not None and _ends_in_motion(traj)
+            continues = traj is not None and ends_in_motion(traj)
             if traj is not None and not self._progress.reached:
                 q_now = q_known if q_known is not None else await self.robot.joints()
                 off = np.max(np.abs(traj.positions[0] - q_now)) > RESUME_TOLERANCE_RAD
-                if not in_motion and (off or _starts_in_motion(traj)):
+                if not in_motion and (off or starts_in_motion(traj)):
                     # the arm is not where the plan assumed (a guarded stop, an alarm), or it is at rest
                     # where the plan flows through: replan from here to the end of this blended run
-                    end = _run_end(planned, i)
+                    end = run_end(planned, i)
                     again = await self._timed(
                         self._motions(plan, range(i, end + 1), q_now, planned.obstacles),
                         cfg.deadlines.plan_s,
@@ -455,7 +424,7 @@ class Orchestrator:
                     )
                     planned.trajs[i : end + 1] = again[i : end + 1]
                     traj = planned.trajs[i]
-                    continues = traj is not None and _ends_in_motion(traj)
+                    continues = traj is not None and ends_in_motion(traj)
                 if traj is not None:
                     res = await self._timed(
                         self.robot.execute(traj, w.guard_force_n, continues=continues),
@@ -490,7 +459,7 @@ class Orchestrator:
                 )
                 if close and g.object_detected is False and cfg.verify_grasp:
                     raise GraspFailureError(f"{w.name}: the gripper closed on nothing")
-            if state is CycleState.LIFT and cfg.verify_grasp and _is_last_of(plan, i, CycleState.LIFT):
+            if state is CycleState.LIFT and cfg.verify_grasp and is_last_of(plan, i, CycleState.LIFT):
                 holding = await self._timed(self.robot.holding(), cfg.deadlines.gripper_s, "grasp check")
                 if holding is False:
                     raise GraspFailureError("grasp verification after LIFT: the object is not in the gripper")
@@ -501,7 +470,7 @@ class Orchestrator:
         plan = planned.plan
         for k in range(i, len(plan.waypoints)):
             traj = planned.trajs[k]
-            if traj is None or not _ends_in_motion(traj):
+            if traj is None or not ends_in_motion(traj):
                 return
             if plan.waypoints[k].gripper is GripperCommand.OPEN:
                 w = plan.waypoints[k]
@@ -530,7 +499,7 @@ class Orchestrator:
         """DONE: back to the plan's safe home, out of the camera's view of the table."""
         home = plan.waypoints[0].joints
         # what was placed is now an obstacle too (the rod standing where the plan put it)
-        obstacles = (*obs.obstacles, _placed_box(plan))
+        obstacles = (*obs.obstacles, placed_box(plan))
         try:
             q = await self.robot.joints()
             if np.max(np.abs(q - home)) > 1e-3:
@@ -562,14 +531,14 @@ class Orchestrator:
         q = await self.robot.joints()
         home = planned.plan.waypoints[0].joints if planned.plan.waypoints[0].name == "SAFE_HOME" else None
         try:
-            up = _raised(await self.motion.tool_pose(q), 0.08)
+            up = raised(await self.motion.tool_pose(q), 0.08)
             moves = [Move(MotionKind.LINEAR, up, label="BACK_OFF", blend=home is not None)]
             if home is not None:
                 moves.append(Move(MotionKind.JOINT, home, label="SAFE_HOME"))
             trajs = await self.motion.plan_moves(q, moves, planned.obstacles)
             for k, traj in enumerate(trajs):
                 if traj is not None:
-                    await self.robot.execute(traj, continues=k + 1 < len(trajs) and _ends_in_motion(traj))
+                    await self.robot.execute(traj, continues=k + 1 < len(trajs) and ends_in_motion(traj))
         except RobotError as exc:
             log.warning("could not back off after a failed grasp: %s", exc)
 
@@ -579,135 +548,3 @@ class Orchestrator:
             await self.robot.stop()
         except RobotError as exc:
             log.warning("stop while aborting failed: %s", exc)
-
-
-def _move(plan: GraspPlan, i: int) -> Move | None:
-    """The move to waypoint ``i`` of a grasp plan, in its scene; None for a waypoint without motion."""
-    w = plan.waypoints[i]
-    held = plan.held_object if w.holding else None
-    if w.motion is MotionKind.HOLD:
-        return None
-    if w.motion is MotionKind.JOINT:
-        # the way home passes what was placed: standing there now, it is an obstacle
-        placed = (_placed_box(plan),) if w.name == WAY_HOME else ()
-        return Move(MotionKind.JOINT, w.joints, held, label=w.name, obstacles=placed)
-    guarded = w.guard_force_n > 0
-    T = w.T_base_tool.copy()
-    if guarded:  # a guarded approach may go as far as the overtravel; touch-down stops it earlier
-        T[:3, 3] += w.guard_overtravel_m * w.guard_direction
-    lifting_off = w.holding and i > 0 and not plan.waypoints[i - 1].holding
-    return Move(MotionKind.LINEAR, T, held, slow=guarded, table_contact=lifting_off or guarded, label=w.name)
-
-
-def _blends(plan: GraspPlan, i: int) -> bool:
-    """Whether the arm may pass waypoint ``i`` without stopping: only physics asks for a stop (the
-    jaws closing, a guarded touch-down and the rest before it, a release) — an open of the jaws
-    while nothing is held is done before setting off."""
-    w = plan.waypoints[i]
-    if i + 1 >= len(plan.waypoints):
-        return False
-    nxt = plan.waypoints[i + 1]
-    if w.motion is MotionKind.HOLD or nxt.motion is MotionKind.HOLD:
-        return False
-    if w.guard_force_n > 0 or nxt.guard_force_n > 0:  # the guard measures its baseline at rest
-        return False
-    return w.gripper is None or (w.gripper is GripperCommand.OPEN and not w.holding)
-
-
-def _ends_in_motion(traj: JointTrajectory) -> bool:
-    return bool(np.any(np.abs(traj.velocities[-1]) > 1e-9))
-
-
-def _starts_in_motion(traj: JointTrajectory) -> bool:
-    return bool(np.any(np.abs(traj.velocities[0]) > 1e-9))
-
-
-def _run_end(planned: PlannedPick, i: int) -> int:
-    """The last waypoint of the blended run that waypoint ``i`` is in (where the arm comes to rest)."""
-    end = i
-    while end + 1 < len(planned.trajs) and (t := planned.trajs[end]) is not None and _ends_in_motion(t):
-        end += 1
-    return end
-
-
-class _RecordingRobot:
-    """The robot port, recording on the outcome what the cycle executed: the joint waypoints the arm
-    went through (each motion's start and where it ended) and the gripper actions."""
-
-    def __init__(self, robot: RobotPort, out: PickOutcome):
-        self._robot, self._out = robot, out
-
-    def __getattr__(self, name: str) -> object:
-        return getattr(self._robot, name)
-
-    async def execute(self, traj: JointTrajectory, *args: object, **kwargs: object) -> MoveOutcome:
-        res: MoveOutcome = await self._robot.execute(traj, *args, **kwargs)  # type: ignore[arg-type]
-        wps = self._out.executed_waypoints
-        start = [float(v) for v in traj.positions[0]]
-        if not wps or max(abs(a - b) for a, b in zip(wps[-1], start, strict=True)) > 1e-6:
-            wps.append(start)
-        wps.append([float(v) for v in res.final_q])
-        return res
-
-    async def gripper(self, close: bool) -> GripOutcome:
-        self._out.gripper_actions += 1
-        return await self._robot.gripper(close)
-
-
-WAY_HOME = "HOME"
-
-
-def _with_way_home(plan: GraspPlan) -> GraspPlan:
-    """The plan with the move back to its safe home as its last waypoint (planned and blended with
-    the retract like any other move), when it starts at one."""
-    first = plan.waypoints[0]
-    if first.name != "SAFE_HOME":
-        return plan
-    home = PlannedWaypoint(WAY_HOME, MotionKind.JOINT, first.T_base_tool.copy(), first.joints.copy())
-    return replace(plan, waypoints=[*plan.waypoints, home])
-
-
-PLACED_TOP_CLEARANCE_M = 0.03
-
-
-def _placed_box(plan: GraspPlan) -> SeenBox:
-    """The placed object's footprint, from the table up to its height."""
-    held = plan.held_object
-    radius = float(getattr(held, "radius", 0.0) or 0.0) or 0.02
-    height = float(getattr(held, "length", 0.0) or 0.0) or 0.06
-    if plan.task is TaskKind.SORT_CUBES:
-        size = list(getattr(held, "size", []) or [0.05, 0.05, 0.05])
-        radius, height = max(size[:2]) / 2, size[2]
-    p = np.asarray(plan.place_position, dtype=float)
-    # taller by what the collision model leaves out at the open jaw's tips (motion.tool finger
-    # clearance + pad): a way home skimming the top would catch the rod with them and knock it over
-    height += PLACED_TOP_CLEARANCE_M
-    return SeenBox(
-        np.array([p[0] - radius, p[1] - radius, 0.0]), np.array([p[0] + radius, p[1] + radius, height])
-    )
-
-
-def _box_around(center: np.ndarray, half: float) -> SeenBox:
-    lo = np.asarray(center, dtype=float) - half
-    lo[2] = min(lo[2], 0.0)  # down to the table
-    return SeenBox(lo, np.asarray(center, dtype=float) + half)
-
-
-def _is_last_of(plan: GraspPlan, i: int, state: CycleState) -> bool:
-    nxt = plan.waypoints[i + 1].name if i + 1 < len(plan.waypoints) else ""
-    return state_for(nxt) is not state
-
-
-def _raised(T: np.ndarray, dz: float) -> np.ndarray:
-    out = T.copy()
-    out[2, 3] += dz
-    return out
-
-
-def _pose_list(T: np.ndarray) -> list[float]:
-    q = matrix_to_quat_xyzw(T[:3, :3])
-    return [float(T[0, 3]), float(T[1, 3]), float(T[2, 3]), *map(float, q)]
-
-
-def _object_id(rod: SeenRod) -> str:
-    return f"rod@{rod.center[0]:.3f},{rod.center[1]:.3f}"

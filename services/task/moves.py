@@ -1,0 +1,124 @@
+"""From a grasp plan's waypoints to the motion planner's moves, and the boxes of what the cycle places
+(pure): where the arm may blend, what is an obstacle on the way, where a blended run ends."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from services.common.frames import matrix_to_quat_xyzw
+from services.common.modes import GripperCommand, MotionKind, TaskKind
+from services.kinematics.trajectory import JointTrajectory
+from services.task.plan import state_for
+from services.task.planned import PlannedPick
+from services.task.ports import GraspPlan, Move, PlannedWaypoint, SeenBox, SeenRod
+from services.task.states import CycleState
+
+
+def move_to(plan: GraspPlan, i: int) -> Move | None:
+    """The move to waypoint ``i`` of a grasp plan, in its scene; None for a waypoint without motion."""
+    w = plan.waypoints[i]
+    held = plan.held_object if w.holding else None
+    if w.motion is MotionKind.HOLD:
+        return None
+    if w.motion is MotionKind.JOINT:
+        # the way home passes what was placed: standing there now, it is an obstacle
+        placed = (placed_box(plan),) if w.name == WAY_HOME else ()
+        return Move(MotionKind.JOINT, w.joints, held, label=w.name, obstacles=placed)
+    guarded = w.guard_force_n > 0
+    T = w.T_base_tool.copy()
+    if guarded:  # a guarded approach may go as far as the overtravel; touch-down stops it earlier
+        T[:3, 3] += w.guard_overtravel_m * w.guard_direction
+    lifting_off = w.holding and i > 0 and not plan.waypoints[i - 1].holding
+    return Move(MotionKind.LINEAR, T, held, slow=guarded, table_contact=lifting_off or guarded, label=w.name)
+
+
+def blends(plan: GraspPlan, i: int) -> bool:
+    """Whether the arm may pass waypoint ``i`` without stopping: only physics asks for a stop (the
+    jaws closing, a guarded touch-down and the rest before it, a release) — an open of the jaws
+    while nothing is held is done before setting off."""
+    w = plan.waypoints[i]
+    if i + 1 >= len(plan.waypoints):
+        return False
+    nxt = plan.waypoints[i + 1]
+    if w.motion is MotionKind.HOLD or nxt.motion is MotionKind.HOLD:
+        return False
+    if w.guard_force_n > 0 or nxt.guard_force_n > 0:  # the guard measures its baseline at rest
+        return False
+    return w.gripper is None or (w.gripper is GripperCommand.OPEN and not w.holding)
+
+
+def ends_in_motion(traj: JointTrajectory) -> bool:
+    return bool(np.any(np.abs(traj.velocities[-1]) > 1e-9))
+
+
+def starts_in_motion(traj: JointTrajectory) -> bool:
+    return bool(np.any(np.abs(traj.velocities[0]) > 1e-9))
+
+
+def run_end(planned: PlannedPick, i: int) -> int:
+    """The last waypoint of the blended run that waypoint ``i`` is in (where the arm comes to rest)."""
+    end = i
+    while end + 1 < len(planned.trajs) and (t := planned.trajs[end]) is not None and ends_in_motion(t):
+        end += 1
+    return end
+
+
+WAY_HOME = "HOME"
+
+
+def with_way_home(plan: GraspPlan) -> GraspPlan:
+    """The plan with the move back to its safe home as its last waypoint (planned and blended with
+    the retract like any other move), when it starts at one."""
+    first = plan.waypoints[0]
+    if first.name != "SAFE_HOME":
+        return plan
+    home = PlannedWaypoint(WAY_HOME, MotionKind.JOINT, first.T_base_tool.copy(), first.joints.copy())
+    return replace(plan, waypoints=[*plan.waypoints, home])
+
+
+PLACED_TOP_CLEARANCE_M = 0.03
+
+
+def placed_box(plan: GraspPlan) -> SeenBox:
+    """The placed object's footprint, from the table up to its height."""
+    held = plan.held_object
+    radius = float(getattr(held, "radius", 0.0) or 0.0) or 0.02
+    height = float(getattr(held, "length", 0.0) or 0.0) or 0.06
+    if plan.task is TaskKind.SORT_CUBES:
+        size = list(getattr(held, "size", []) or [0.05, 0.05, 0.05])
+        radius, height = max(size[:2]) / 2, size[2]
+    p = np.asarray(plan.place_position, dtype=float)
+    # taller by what the collision model leaves out at the open jaw's tips (motion.tool finger
+    # clearance + pad): a way home skimming the top would catch the rod with them and knock it over
+    height += PLACED_TOP_CLEARANCE_M
+    return SeenBox(
+        np.array([p[0] - radius, p[1] - radius, 0.0]), np.array([p[0] + radius, p[1] + radius, height])
+    )
+
+
+def box_around(center: np.ndarray, half: float) -> SeenBox:
+    lo = np.asarray(center, dtype=float) - half
+    lo[2] = min(lo[2], 0.0)  # down to the table
+    return SeenBox(lo, np.asarray(center, dtype=float) + half)
+
+
+def is_last_of(plan: GraspPlan, i: int, state: CycleState) -> bool:
+    nxt = plan.waypoints[i + 1].name if i + 1 < len(plan.waypoints) else ""
+    return state_for(nxt) is not state
+
+
+def raised(T: np.ndarray, dz: float) -> np.ndarray:
+    out = T.copy()
+    out[2, 3] += dz
+    return out
+
+
+def pose_list(T: np.ndarray) -> list[float]:
+    q = matrix_to_quat_xyzw(T[:3, :3])
+    return [float(T[0, 3]), float(T[1, 3]), float(T[2, 3]), *map(float, q)]
+
+
+def object_id(rod: SeenRod) -> str:
+    return f"rod@{rod.center[0]:.3f},{rod.center[1]:.3f}"

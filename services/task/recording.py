@@ -1,0 +1,31 @@
+"""The robot port that records on the outcome what a cycle executed (for the eval's bound)."""
+
+from __future__ import annotations
+
+from services.kinematics.trajectory import JointTrajectory
+from services.task.ports import GripOutcome, MoveOutcome, RobotPort
+from services.task.states import PickOutcome
+
+
+class RecordingRobot:
+    """The robot port, recording on the outcome what the cycle executed: the joint waypoints the arm
+    went through (each motion's start and where it ended) and the gripper actions."""
+
+    def __init__(self, robot: RobotPort, out: PickOutcome):
+        self._robot, self._out = robot, out
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(self._robot, name)
+
+    async def execute(self, traj: JointTrajectory, *args: object, **kwargs: object) -> MoveOutcome:
+        res: MoveOutcome = await self._robot.execute(traj, *args, **kwargs)  # type: ignore[arg-type]
+        wps = self._out.executed_waypoints
+        start = [float(v) for v in traj.positions[0]]
+        if not wps or max(abs(a - b) for a, b in zip(wps[-1], start, strict=True)) > 1e-6:
+            wps.append(start)
+        wps.append([float(v) for v in res.final_q])
+        return res
+
+    async def gripper(self, close: bool) -> GripOutcome:
+        self._out.gripper_actions += 1
+        return await self._robot.gripper(close)
