@@ -40,6 +40,7 @@ from services.common.settings.loader import (
 from services.common.settings.motion import MotionSettings, ToolSettings
 from services.common.settings.net import GrpcSettings, ZenohSettings
 from services.common.settings.observability import LoggingSettings, MetricsSettings
+from services.common.settings.record import FoxgloveSettings, McapCompression, RecordSettings
 from services.common.settings.robot import (
     KeyPoseCycleSettings,
     ReconnectSettings,
@@ -79,6 +80,7 @@ __all__ = [
     "CubeSortSettings",
     "DatabaseSettings",
     "ForceClosureSettings",
+    "FoxgloveSettings",
     "GatewaySettings",
     "GraspGripperSettings",
     "GraspSettings",
@@ -86,11 +88,13 @@ __all__ = [
     "GrpcSettings",
     "KeyPoseCycleSettings",
     "LoggingSettings",
+    "McapCompression",
     "MetricsSettings",
     "Model",
     "MotionSettings",
     "ObstacleRuleSettings",
     "ReconnectSettings",
+    "RecordSettings",
     "RobotSettings",
     "RodDetectionSettings",
     "RodStandSettings",

@@ -27,6 +27,7 @@ from services.common.settings.gripper import GripperSettings
 from services.common.settings.motion import MotionSettings
 from services.common.settings.net import GrpcSettings, ZenohSettings
 from services.common.settings.observability import LoggingSettings, MetricsSettings
+from services.common.settings.record import RecordSettings
 from services.common.settings.robot import KeyPoseCycleSettings, RobotSettings
 from services.common.settings.sim import SimSettings
 from services.common.settings.task import TaskSettings
@@ -59,6 +60,7 @@ class Settings(BaseSettings):
     gateway: GatewaySettings = GatewaySettings()
     task: TaskSettings = TaskSettings()
     metrics: MetricsSettings = MetricsSettings()
+    record: RecordSettings = RecordSettings()
 
     @model_validator(mode="after")
     def _profile_safety(self) -> Settings:
