@@ -15,6 +15,11 @@
    cluster's visible surface (robust least squares on the distance to the box
    surface; x, y, yaw in the table plane), so the centre is the cube's centre,
    not the centroid of the faces the camera happens to see.
+6. Visibility: a cluster touching the image border is cut by the edge (never a
+   pickable cube); a fitted cube whose camera-facing faces are partly hidden by
+   something nearer (the depth image sees that nearer surface where the face
+   should be) is occluded: pickable while little is hidden, an obstacle beyond
+   ``occluded_max_fraction``.
 """
 
 from __future__ import annotations
@@ -43,6 +48,10 @@ from services.vision.results import CubeDetection, ObstacleBox, Visibility
 Array = np.ndarray
 
 _MAX_CUBE_POINTS = 300
+# below this hidden share a face is whole: single pixels at a face's outline can read the nearer
+# neighbour's depth through the sensor's edge blur without anything standing in front
+_HIDDEN_NOISE_FRACTION = 0.03
+_FACE_SAMPLES = 9  # per side of each face: 81 surface points a face
 # A cluster cut by the image edge is the visible part of something larger: reported from a quarter of
 # the usual minimum size, so a corner at the edge is not left out of the planning scene.
 _EDGE_CLUSTER_DIVISOR = 4
@@ -150,20 +159,21 @@ def detect_cubes_and_obstacles(
         size = params.cube_size_m
         top = float(np.percentile(local[:, 2], 90))
         cube_like = extent <= 1.6 * size and 0.7 * size < top < 1.3 * size
-        if cube_like and visibility is Visibility.WHOLE:
-            cubes.append(
-                replace(
-                    _fit_cube(local, (cx, cy, np.deg2rad(angle)), size, colour, n_full, T_cam_table, intr),
-                    mean_rgb=mean_rgb,
-                )
-            )
-            continue
         what = (
             f"{colour} cube cut by the image edge: its centre is unknown, not pickable"
             if cube_like
             else f"{colour} cluster of {n_full} px, {extent * 1000:.0f} mm across and "
             f"{top * 1000:.0f} mm high: neither a cube nor the obstacle"
         )
+        if cube_like and visibility is Visibility.WHOLE:
+            cube = _fit_cube(local, (cx, cy, np.deg2rad(angle)), size, colour, n_full, T_cam_table, intr)
+            hidden = hidden_fraction(cube, size, depth_m, intr, params.occlusion_depth_margin_m)
+            if hidden <= params.occluded_max_fraction:
+                seen = Visibility.OCCLUDED if hidden > _HIDDEN_NOISE_FRACTION else Visibility.WHOLE
+                cubes.append(replace(cube, mean_rgb=mean_rgb, visibility=seen, hidden_fraction=hidden))
+                continue
+            visibility = Visibility.OCCLUDED
+            what = f"{colour} cube {hidden:.0%} hidden by something nearer: its centre is uncertain, not pickable"
         if params.unrecognised_as_obstacles:
             found.append(_ObstacleCluster(cp, colour, n_full, mean_rgb, visibility, False))
             what += "; reported as an obstacle"
@@ -224,9 +234,7 @@ def _merge_touching(found: list[_ObstacleCluster], plane: Plane, margin: float) 
                         big.colour,
                         n,
                         (a.mean_rgb * a.n_full + b.mean_rgb * b.n_full) / n,
-                        Visibility.CUT_BY_EDGE
-                        if Visibility.CUT_BY_EDGE in (a.visibility, b.visibility)
-                        else big.visibility,
+                        max(a.visibility, b.visibility, key=_VISIBILITY_RANK.index),
                         a.recognised or b.recognised,
                     )
                     del out[j]
@@ -235,6 +243,10 @@ def _merge_touching(found: list[_ObstacleCluster], plane: Plane, margin: float) 
             if merged:
                 break
     return out
+
+
+# a merged obstacle is as partial as its most partial piece
+_VISIBILITY_RANK = (Visibility.WHOLE, Visibility.OCCLUDED, Visibility.CUT_BY_EDGE)
 
 
 def _visibility(rows: Array, cols: Array, stride: int, intr: CameraIntrinsics) -> Visibility:
@@ -327,6 +339,39 @@ def _fit_cube(
         fit_rms_m=float(np.sqrt(np.mean(np.minimum(np.abs(res), 0.01) ** 2))),
         image_uv=project(center_cam[None], intr)[0],
     )
+
+
+def hidden_fraction(
+    cube: CubeDetection, size: float, depth_m: Array, intr: CameraIntrinsics, margin_m: float
+) -> float:
+    """Share of the fitted cube's camera-facing surface that something nearer hides.
+
+    Points on the faces that face the camera are projected into the depth image; where the image
+    measures a surface more than ``margin_m`` nearer than the face, an object in front hides it. Pixels
+    without depth (dropout) and points outside the image say nothing and are not counted."""
+    half = size / 2.0
+    g = (np.arange(_FACE_SAMPLES) + 0.5) / _FACE_SAMPLES * size - half
+    u, v = (a.ravel() for a in np.meshgrid(g, g))
+    R, c = cube.rotation_cam, cube.centroid_cam
+    hidden = seen = 0
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            normal = sign * R[:, axis]
+            centre = c + half * normal
+            if normal @ (-centre) <= 0:  # faces away from the camera (or the table underneath)
+                continue
+            if axis == 2 and sign < 0:
+                continue
+            e1, e2 = R[:, (axis + 1) % 3], R[:, (axis + 2) % 3]
+            pts = centre + u[:, None] * e1 + v[:, None] * e2
+            uv = np.rint(project(pts, intr)).astype(int)
+            ok = (uv[:, 0] >= 0) & (uv[:, 0] < intr.width) & (uv[:, 1] >= 0) & (uv[:, 1] < intr.height)
+            measured = depth_m[uv[ok, 1], uv[ok, 0]]
+            expected = pts[ok, 2]
+            valid = measured > 0
+            hidden += int(np.count_nonzero(valid & (measured < expected - margin_m)))
+            seen += int(np.count_nonzero(valid))
+    return hidden / seen if seen else 0.0
 
 
 def _obstacle_box(

@@ -6,7 +6,7 @@ import numpy as np
 from pickplace.v1 import common_pb2, vision_pb2
 
 from services.vision.pose import rotation_to_quaternion
-from services.vision.results import DetectionResult
+from services.vision.results import DetectionResult, Visibility
 
 Array = np.ndarray
 
@@ -30,6 +30,19 @@ def pose(p: Array, R: Array) -> common_pb2.Pose:
         qz=float(q[2]),
         qw=float(q[3]),
     )
+
+
+VISIBILITY_MSG: dict[Visibility, vision_pb2.Visibility.ValueType] = {
+    Visibility.WHOLE: vision_pb2.VISIBILITY_WHOLE,
+    Visibility.CUT_BY_EDGE: vision_pb2.VISIBILITY_CUT_BY_EDGE,
+    Visibility.OCCLUDED: vision_pb2.VISIBILITY_OCCLUDED,
+}
+
+
+def rgb(mean_rgb: Array | None) -> vision_pb2.Rgb | None:
+    if mean_rgb is None:
+        return None
+    return vision_pb2.Rgb(r=float(mean_rgb[0]), g=float(mean_rgb[1]), b=float(mean_rgb[2]))
 
 
 def detections_msg(result: DetectionResult, frame_id: str = "camera") -> vision_pb2.DetectedObjects:
@@ -63,6 +76,10 @@ def detections_msg(result: DetectionResult, frame_id: str = "camera") -> vision_
             pose_camera=pose(c.centroid_cam, c.rotation_cam),
             color_label=c.color_label,
             n_points=c.n_points,
+            visibility=VISIBILITY_MSG[c.visibility],
+            mean_rgb=rgb(c.mean_rgb),
+            fit_rms_m=c.fit_rms_m,
+            hidden_fraction=c.hidden_fraction,
         )
         if c.centroid_base is not None and c.rotation_base is not None:
             cube.has_base = True
@@ -73,6 +90,9 @@ def detections_msg(result: DetectionResult, frame_id: str = "camera") -> vision_
             camera=vision_pb2.BoxBounds(min=vec3(o.min_cam), max=vec3(o.max_cam)),
             color_label=o.color_label,
             n_points=o.n_points,
+            visibility=VISIBILITY_MSG[o.visibility],
+            mean_rgb=rgb(o.mean_rgb),
+            recognised=o.recognised,
         )
         if o.min_base is not None and o.max_base is not None:
             box.has_base = True

@@ -86,6 +86,7 @@ class CubeDetection:
     rotation_base: Array | None = None
     mean_rgb: Array | None = None  # mean colour of its pixels (what an "unknown" colour was)
     visibility: Visibility = Visibility.WHOLE
+    hidden_fraction: float = 0.0  # share of its camera-facing surface hidden by something nearer
 
     @property
     def quat_cam(self) -> Array:

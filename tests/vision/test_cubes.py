@@ -159,3 +159,56 @@ def test_colour_table_knows_yellow_and_unknown_colours_keep_their_mean():
     (cube,) = result.cubes
     assert cube.color_label == "unknown"
     assert cube.mean_rgb is not None and cube.mean_rgb[0] > 100 and cube.mean_rgb[2] < 60  # still yellowish
+
+
+def _occlusion_scene(occluder: BoxSpec | None) -> tuple[SyntheticScene, BoxSpec]:
+    """A red cube with, optionally, a grey box between it and the camera (which looks from +x)."""
+    cube = BoxSpec(center=(0.40, 0.0, 0.025), size=(0.05,) * 3, yaw=0.3, color="red")
+    return _scene_with([cube] + ([occluder] if occluder else [])), cube
+
+
+def test_a_partly_hidden_cube_is_fitted_from_its_visible_faces_and_marked_occluded():
+    corner = BoxSpec(center=(0.47, 0.06, 0.06), size=(0.03, 0.08, 0.12), yaw=0.0, color="grey")
+    scene, truth = _occlusion_scene(corner)
+    result = VisionPipeline().detect(render_scene(scene, NoiseModel(), seed=1).frame, scene.T_base_camera)
+    (cube,) = result.cubes
+    assert cube.visibility is Visibility.OCCLUDED and 0.03 < cube.hidden_fraction < 0.3
+    assert np.linalg.norm(cube.centroid_base - np.asarray(truth.center)) < 0.002
+    assert len(result.obstacles) == 1  # the box in front is in the planning scene
+
+
+def test_an_unoccluded_cube_is_whole():
+    scene, _ = _occlusion_scene(None)
+    result = VisionPipeline().detect(render_scene(scene, NoiseModel(), seed=1).frame, scene.T_base_camera)
+    (cube,) = result.cubes
+    assert cube.visibility is Visibility.WHOLE and cube.hidden_fraction < 0.03
+
+
+def test_a_mostly_hidden_cube_is_never_reported_at_a_guessed_centre():
+    wall = BoxSpec(center=(0.47, 0.0, 0.06), size=(0.03, 0.14, 0.12), yaw=0.0, color="grey")
+    scene, truth = _occlusion_scene(wall)
+    result = VisionPipeline().detect(render_scene(scene, NoiseModel(), seed=2).frame, scene.T_base_camera)
+    assert result.cubes == ()
+    assert any("hidden by something nearer" in n for n in result.notes), result.notes
+    # it is still in the planning scene, as an obstacle marked occluded
+    holding = [o for o in result.obstacles if np.all(o.contains(truth.corners()))]
+    assert holding and holding[0].visibility is Visibility.OCCLUDED
+
+
+def test_visibility_mean_colour_and_recognition_cross_the_wire():
+    from pickplace.v1 import vision_pb2
+
+    from services.vision.messages import detections_msg
+
+    corner = BoxSpec(center=(0.47, 0.06, 0.06), size=(0.03, 0.08, 0.12), yaw=0.0, color="grey")
+    scene, _ = _occlusion_scene(corner)
+    result = VisionPipeline().detect(render_scene(scene, NoiseModel(), seed=1).frame, scene.T_base_camera)
+    msg = vision_pb2.DetectedObjects.FromString(detections_msg(result).SerializeToString())
+    (cube,) = msg.cubes
+    assert cube.visibility == vision_pb2.VISIBILITY_OCCLUDED
+    assert cube.hidden_fraction == pytest.approx(result.cubes[0].hidden_fraction)
+    assert cube.mean_rgb.r > 100 > cube.mean_rgb.g  # red
+    assert cube.fit_rms_m < 0.005
+    (box,) = msg.obstacles
+    assert box.visibility == vision_pb2.VISIBILITY_WHOLE and not box.recognised
+    assert abs(box.mean_rgb.r - box.mean_rgb.g) < 30  # grey

@@ -25,7 +25,7 @@ _sym_db = _symbol_database.Default()
 from pickplace.v1 import common_pb2 as pickplace_dot_v1_dot_common__pb2
 
 
-DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x19pickplace/v1/vision.proto\x12\x0cpickplace.v1\x1a\x19pickplace/v1/common.proto\"\'\n\x04Vec3\x12\t\n\x01x\x18\x01 \x01(\x01\x12\t\n\x01y\x18\x02 \x01(\x01\x12\t\n\x01z\x18\x03 \x01(\x01\"u\n\x10\x43\x61meraIntrinsics\x12\r\n\x05width\x18\x01 \x01(\r\x12\x0e\n\x06height\x18\x02 \x01(\r\x12\n\n\x02\x66x\x18\x03 \x01(\x01\x12\n\n\x02\x66y\x18\x04 \x01(\x01\x12\n\n\x02\x63x\x18\x05 \x01(\x01\x12\n\n\x02\x63y\x18\x06 \x01(\x01\x12\x12\n\ndistortion\x18\x07 \x03(\x01\"\xa1\x01\n\tRGBDFrame\x12$\n\x06header\x18\x01 \x01(\x0b\x32\x14.pickplace.v1.Header\x12\x32\n\nintrinsics\x18\x02 \x01(\x0b\x32\x1e.pickplace.v1.CameraIntrinsics\x12\x12\n\ncolor_rgb8\x18\x03 \x01(\x0c\x12\x11\n\tdepth_u16\x18\x04 \x01(\x0c\x12\x13\n\x0b\x64\x65pth_scale\x18\x05 \x01(\x01\"\xf6\x02\n\x0cRodDetection\x12)\n\rcenter_camera\x18\x01 \x01(\x0b\x32\x12.pickplace.v1.Vec3\x12\'\n\x0b\x61xis_camera\x18\x02 \x01(\x0b\x32\x12.pickplace.v1.Vec3\x12\'\n\x0bpose_camera\x18\x03 \x01(\x0b\x32\x12.pickplace.v1.Pose\x12\x10\n\x08has_base\x18\x04 \x01(\x08\x12\'\n\x0b\x63\x65nter_base\x18\x05 \x01(\x0b\x32\x12.pickplace.v1.Vec3\x12%\n\taxis_base\x18\x06 \x01(\x0b\x32\x12.pickplace.v1.Vec3\x12%\n\tpose_base\x18\x07 \x01(\x0b\x32\x12.pickplace.v1.Pose\x12\x10\n\x08length_m\x18\x08 \x01(\x01\x12\x12\n\ndiameter_m\x18\t \x01(\x01\x12\x12\n\nconfidence\x18\n \x01(\x01\x12\x0e\n\x06method\x18\x0b \x01(\t\x12\x16\n\x0en_depth_points\x18\x0c \x01(\r\"\xf0\x01\n\rCubeDetection\x12+\n\x0f\x63\x65ntroid_camera\x18\x01 \x01(\x0b\x32\x12.pickplace.v1.Vec3\x12\'\n\x0bpose_camera\x18\x02 \x01(\x0b\x32\x12.pickplace.v1.Pose\x12\x10\n\x08has_base\x18\x03 \x01(\x08\x12)\n\rcentroid_base\x18\x04 \x01(\x0b\x32\x12.pickplace.v1.Vec3\x12%\n\tpose_base\x18\x05 \x01(\x0b\x32\x12.pickplace.v1.Pose\x12\x13\n\x0b\x63olor_label\x18\x06 \x01(\t\x12\x10\n\x08n_points\x18\x07 \x01(\r\"M\n\tBoxBounds\x12\x1f\n\x03min\x18\x01 \x01(\x0b\x32\x12.pickplace.v1.Vec3\x12\x1f\n\x03max\x18\x02 \x01(\x0b\x32\x12.pickplace.v1.Vec3\"\x96\x01\n\x0bObstacleBox\x12\'\n\x06\x63\x61mera\x18\x01 \x01(\x0b\x32\x17.pickplace.v1.BoxBounds\x12\x10\n\x08has_base\x18\x02 \x01(\x08\x12%\n\x04\x62\x61se\x18\x03 \x01(\x0b\x32\x17.pickplace.v1.BoxBounds\x12\x13\n\x0b\x63olor_label\x18\x04 \x01(\t\x12\x10\n\x08n_points\x18\x05 \x01(\r\"\xe8\x02\n\x0f\x44\x65tectedObjects\x12$\n\x06header\x18\x01 \x01(\x0b\x32\x14.pickplace.v1.Header\x12(\n\x04rods\x18\x02 \x03(\x0b\x32\x1a.pickplace.v1.RodDetection\x12*\n\x05\x63ubes\x18\x03 \x03(\x0b\x32\x1b.pickplace.v1.CubeDetection\x12,\n\tobstacles\x18\x04 \x03(\x0b\x32\x19.pickplace.v1.ObstacleBox\x12@\n\ntimings_ms\x18\x05 \x03(\x0b\x32,.pickplace.v1.DetectedObjects.TimingsMsEntry\x12\r\n\x05notes\x18\x06 \x03(\t\x12\x14\n\x0crod_detected\x18\x07 \x01(\x08\x12\x12\n\ncalibrated\x18\x08 \x01(\x08\x1a\x30\n\x0eTimingsMsEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12\r\n\x05value\x18\x02 \x01(\x01:\x02\x38\x01\"T\n\rDetectRequest\x12&\n\x05\x66rame\x18\x01 \x01(\x0b\x32\x17.pickplace.v1.RGBDFrame\x12\x1b\n\x13include_debug_image\x18\x02 \x01(\x08\"T\n\x0e\x44\x65tectResponse\x12.\n\x07objects\x18\x01 \x01(\x0b\x32\x1d.pickplace.v1.DetectedObjects\x12\x12\n\ndebug_jpeg\x18\x02 \x01(\x0c\"\x13\n\x11\x44\x65\x62ugImageRequest\"@\n\nDebugImage\x12$\n\x06header\x18\x01 \x01(\x0b\x32\x14.pickplace.v1.Header\x12\x0c\n\x04jpeg\x18\x02 \x01(\x0c\x32\x99\x01\n\x06Vision\x12\x43\n\x06\x44\x65tect\x12\x1b.pickplace.v1.DetectRequest\x1a\x1c.pickplace.v1.DetectResponse\x12J\n\rGetDebugImage\x12\x1f.pickplace.v1.DebugImageRequest\x1a\x18.pickplace.v1.DebugImageb\x06proto3')
+DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x19pickplace/v1/vision.proto\x12\x0cpickplace.v1\x1a\x19pickplace/v1/common.proto\"\'\n\x04Vec3\x12\t\n\x01x\x18\x01 \x01(\x01\x12\t\n\x01y\x18\x02 \x01(\x01\x12\t\n\x01z\x18\x03 \x01(\x01\"u\n\x10\x43\x61meraIntrinsics\x12\r\n\x05width\x18\x01 \x01(\r\x12\x0e\n\x06height\x18\x02 \x01(\r\x12\n\n\x02\x66x\x18\x03 \x01(\x01\x12\n\n\x02\x66y\x18\x04 \x01(\x01\x12\n\n\x02\x63x\x18\x05 \x01(\x01\x12\n\n\x02\x63y\x18\x06 \x01(\x01\x12\x12\n\ndistortion\x18\x07 \x03(\x01\"\xa1\x01\n\tRGBDFrame\x12$\n\x06header\x18\x01 \x01(\x0b\x32\x14.pickplace.v1.Header\x12\x32\n\nintrinsics\x18\x02 \x01(\x0b\x32\x1e.pickplace.v1.CameraIntrinsics\x12\x12\n\ncolor_rgb8\x18\x03 \x01(\x0c\x12\x11\n\tdepth_u16\x18\x04 \x01(\x0c\x12\x13\n\x0b\x64\x65pth_scale\x18\x05 \x01(\x01\"&\n\x03Rgb\x12\t\n\x01r\x18\x01 \x01(\x01\x12\t\n\x01g\x18\x02 \x01(\x01\x12\t\n\x01\x62\x18\x03 \x01(\x01\"\xf6\x02\n\x0cRodDetection\x12)\n\rcenter_camera\x18\x01 \x01(\x0b\x32\x12.pickplace.v1.Vec3\x12\'\n\x0b\x61xis_camera\x18\x02 \x01(\x0b\x32\x12.pickplace.v1.Vec3\x12\'\n\x0bpose_camera\x18\x03 \x01(\x0b\x32\x12.pickplace.v1.Pose\x12\x10\n\x08has_base\x18\x04 \x01(\x08\x12\'\n\x0b\x63\x65nter_base\x18\x05 \x01(\x0b\x32\x12.pickplace.v1.Vec3\x12%\n\taxis_base\x18\x06 \x01(\x0b\x32\x12.pickplace.v1.Vec3\x12%\n\tpose_base\x18\x07 \x01(\x0b\x32\x12.pickplace.v1.Pose\x12\x10\n\x08length_m\x18\x08 \x01(\x01\x12\x12\n\ndiameter_m\x18\t \x01(\x01\x12\x12\n\nconfidence\x18\n \x01(\x01\x12\x0e\n\x06method\x18\x0b \x01(\t\x12\x16\n\x0en_depth_points\x18\x0c \x01(\r\"\xef\x02\n\rCubeDetection\x12+\n\x0f\x63\x65ntroid_camera\x18\x01 \x01(\x0b\x32\x12.pickplace.v1.Vec3\x12\'\n\x0bpose_camera\x18\x02 \x01(\x0b\x32\x12.pickplace.v1.Pose\x12\x10\n\x08has_base\x18\x03 \x01(\x08\x12)\n\rcentroid_base\x18\x04 \x01(\x0b\x32\x12.pickplace.v1.Vec3\x12%\n\tpose_base\x18\x05 \x01(\x0b\x32\x12.pickplace.v1.Pose\x12\x13\n\x0b\x63olor_label\x18\x06 \x01(\t\x12\x10\n\x08n_points\x18\x07 \x01(\r\x12,\n\nvisibility\x18\x08 \x01(\x0e\x32\x18.pickplace.v1.Visibility\x12#\n\x08mean_rgb\x18\t \x01(\x0b\x32\x11.pickplace.v1.Rgb\x12\x11\n\tfit_rms_m\x18\n \x01(\x01\x12\x17\n\x0fhidden_fraction\x18\x0b \x01(\x01\"M\n\tBoxBounds\x12\x1f\n\x03min\x18\x01 \x01(\x0b\x32\x12.pickplace.v1.Vec3\x12\x1f\n\x03max\x18\x02 \x01(\x0b\x32\x12.pickplace.v1.Vec3\"\xfd\x01\n\x0bObstacleBox\x12\'\n\x06\x63\x61mera\x18\x01 \x01(\x0b\x32\x17.pickplace.v1.BoxBounds\x12\x10\n\x08has_base\x18\x02 \x01(\x08\x12%\n\x04\x62\x61se\x18\x03 \x01(\x0b\x32\x17.pickplace.v1.BoxBounds\x12\x13\n\x0b\x63olor_label\x18\x04 \x01(\t\x12\x10\n\x08n_points\x18\x05 \x01(\r\x12,\n\nvisibility\x18\x06 \x01(\x0e\x32\x18.pickplace.v1.Visibility\x12#\n\x08mean_rgb\x18\x07 \x01(\x0b\x32\x11.pickplace.v1.Rgb\x12\x12\n\nrecognised\x18\x08 \x01(\x08\"\xe8\x02\n\x0f\x44\x65tectedObjects\x12$\n\x06header\x18\x01 \x01(\x0b\x32\x14.pickplace.v1.Header\x12(\n\x04rods\x18\x02 \x03(\x0b\x32\x1a.pickplace.v1.RodDetection\x12*\n\x05\x63ubes\x18\x03 \x03(\x0b\x32\x1b.pickplace.v1.CubeDetection\x12,\n\tobstacles\x18\x04 \x03(\x0b\x32\x19.pickplace.v1.ObstacleBox\x12@\n\ntimings_ms\x18\x05 \x03(\x0b\x32,.pickplace.v1.DetectedObjects.TimingsMsEntry\x12\r\n\x05notes\x18\x06 \x03(\t\x12\x14\n\x0crod_detected\x18\x07 \x01(\x08\x12\x12\n\ncalibrated\x18\x08 \x01(\x08\x1a\x30\n\x0eTimingsMsEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12\r\n\x05value\x18\x02 \x01(\x01:\x02\x38\x01\"T\n\rDetectRequest\x12&\n\x05\x66rame\x18\x01 \x01(\x0b\x32\x17.pickplace.v1.RGBDFrame\x12\x1b\n\x13include_debug_image\x18\x02 \x01(\x08\"T\n\x0e\x44\x65tectResponse\x12.\n\x07objects\x18\x01 \x01(\x0b\x32\x1d.pickplace.v1.DetectedObjects\x12\x12\n\ndebug_jpeg\x18\x02 \x01(\x0c\"\x13\n\x11\x44\x65\x62ugImageRequest\"@\n\nDebugImage\x12$\n\x06header\x18\x01 \x01(\x0b\x32\x14.pickplace.v1.Header\x12\x0c\n\x04jpeg\x18\x02 \x01(\x0c*s\n\nVisibility\x12\x1a\n\x16VISIBILITY_UNSPECIFIED\x10\x00\x12\x14\n\x10VISIBILITY_WHOLE\x10\x01\x12\x1a\n\x16VISIBILITY_CUT_BY_EDGE\x10\x02\x12\x17\n\x13VISIBILITY_OCCLUDED\x10\x03\x32\x99\x01\n\x06Vision\x12\x43\n\x06\x44\x65tect\x12\x1b.pickplace.v1.DetectRequest\x1a\x1c.pickplace.v1.DetectResponse\x12J\n\rGetDebugImage\x12\x1f.pickplace.v1.DebugImageRequest\x1a\x18.pickplace.v1.DebugImageb\x06proto3')
 
 _globals = globals()
 _builder.BuildMessageAndEnumDescriptors(DESCRIPTOR, _globals)
@@ -34,32 +34,36 @@ if not _descriptor._USE_C_DESCRIPTORS:
   DESCRIPTOR._loaded_options = None
   _globals['_DETECTEDOBJECTS_TIMINGSMSENTRY']._loaded_options = None
   _globals['_DETECTEDOBJECTS_TIMINGSMSENTRY']._serialized_options = b'8\001'
+  _globals['_VISIBILITY']._serialized_start=2138
+  _globals['_VISIBILITY']._serialized_end=2253
   _globals['_VEC3']._serialized_start=70
   _globals['_VEC3']._serialized_end=109
   _globals['_CAMERAINTRINSICS']._serialized_start=111
   _globals['_CAMERAINTRINSICS']._serialized_end=228
   _globals['_RGBDFRAME']._serialized_start=231
   _globals['_RGBDFRAME']._serialized_end=392
-  _globals['_RODDETECTION']._serialized_start=395
-  _globals['_RODDETECTION']._serialized_end=769
-  _globals['_CUBEDETECTION']._serialized_start=772
-  _globals['_CUBEDETECTION']._serialized_end=1012
-  _globals['_BOXBOUNDS']._serialized_start=1014
-  _globals['_BOXBOUNDS']._serialized_end=1091
-  _globals['_OBSTACLEBOX']._serialized_start=1094
-  _globals['_OBSTACLEBOX']._serialized_end=1244
-  _globals['_DETECTEDOBJECTS']._serialized_start=1247
-  _globals['_DETECTEDOBJECTS']._serialized_end=1607
-  _globals['_DETECTEDOBJECTS_TIMINGSMSENTRY']._serialized_start=1559
-  _globals['_DETECTEDOBJECTS_TIMINGSMSENTRY']._serialized_end=1607
-  _globals['_DETECTREQUEST']._serialized_start=1609
-  _globals['_DETECTREQUEST']._serialized_end=1693
-  _globals['_DETECTRESPONSE']._serialized_start=1695
-  _globals['_DETECTRESPONSE']._serialized_end=1779
-  _globals['_DEBUGIMAGEREQUEST']._serialized_start=1781
-  _globals['_DEBUGIMAGEREQUEST']._serialized_end=1800
-  _globals['_DEBUGIMAGE']._serialized_start=1802
-  _globals['_DEBUGIMAGE']._serialized_end=1866
-  _globals['_VISION']._serialized_start=1869
-  _globals['_VISION']._serialized_end=2022
+  _globals['_RGB']._serialized_start=394
+  _globals['_RGB']._serialized_end=432
+  _globals['_RODDETECTION']._serialized_start=435
+  _globals['_RODDETECTION']._serialized_end=809
+  _globals['_CUBEDETECTION']._serialized_start=812
+  _globals['_CUBEDETECTION']._serialized_end=1179
+  _globals['_BOXBOUNDS']._serialized_start=1181
+  _globals['_BOXBOUNDS']._serialized_end=1258
+  _globals['_OBSTACLEBOX']._serialized_start=1261
+  _globals['_OBSTACLEBOX']._serialized_end=1514
+  _globals['_DETECTEDOBJECTS']._serialized_start=1517
+  _globals['_DETECTEDOBJECTS']._serialized_end=1877
+  _globals['_DETECTEDOBJECTS_TIMINGSMSENTRY']._serialized_start=1829
+  _globals['_DETECTEDOBJECTS_TIMINGSMSENTRY']._serialized_end=1877
+  _globals['_DETECTREQUEST']._serialized_start=1879
+  _globals['_DETECTREQUEST']._serialized_end=1963
+  _globals['_DETECTRESPONSE']._serialized_start=1965
+  _globals['_DETECTRESPONSE']._serialized_end=2049
+  _globals['_DEBUGIMAGEREQUEST']._serialized_start=2051
+  _globals['_DEBUGIMAGEREQUEST']._serialized_end=2070
+  _globals['_DEBUGIMAGE']._serialized_start=2072
+  _globals['_DEBUGIMAGE']._serialized_end=2136
+  _globals['_VISION']._serialized_start=2256
+  _globals['_VISION']._serialized_end=2409
 # @@protoc_insertion_point(module_scope)

@@ -1,11 +1,23 @@
 from pickplace.v1 import common_pb2 as _common_pb2
 from google.protobuf.internal import containers as _containers
+from google.protobuf.internal import enum_type_wrapper as _enum_type_wrapper
 from google.protobuf import descriptor as _descriptor
 from google.protobuf import message as _message
 from collections.abc import Iterable as _Iterable, Mapping as _Mapping
 from typing import ClassVar as _ClassVar, Optional as _Optional, Union as _Union
 
 DESCRIPTOR: _descriptor.FileDescriptor
+
+class Visibility(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
+    __slots__ = ()
+    VISIBILITY_UNSPECIFIED: _ClassVar[Visibility]
+    VISIBILITY_WHOLE: _ClassVar[Visibility]
+    VISIBILITY_CUT_BY_EDGE: _ClassVar[Visibility]
+    VISIBILITY_OCCLUDED: _ClassVar[Visibility]
+VISIBILITY_UNSPECIFIED: Visibility
+VISIBILITY_WHOLE: Visibility
+VISIBILITY_CUT_BY_EDGE: Visibility
+VISIBILITY_OCCLUDED: Visibility
 
 class Vec3(_message.Message):
     __slots__ = ("x", "y", "z")
@@ -49,6 +61,16 @@ class RGBDFrame(_message.Message):
     depth_scale: float
     def __init__(self, header: _Optional[_Union[_common_pb2.Header, _Mapping]] = ..., intrinsics: _Optional[_Union[CameraIntrinsics, _Mapping]] = ..., color_rgb8: _Optional[bytes] = ..., depth_u16: _Optional[bytes] = ..., depth_scale: _Optional[float] = ...) -> None: ...
 
+class Rgb(_message.Message):
+    __slots__ = ("r", "g", "b")
+    R_FIELD_NUMBER: _ClassVar[int]
+    G_FIELD_NUMBER: _ClassVar[int]
+    B_FIELD_NUMBER: _ClassVar[int]
+    r: float
+    g: float
+    b: float
+    def __init__(self, r: _Optional[float] = ..., g: _Optional[float] = ..., b: _Optional[float] = ...) -> None: ...
+
 class RodDetection(_message.Message):
     __slots__ = ("center_camera", "axis_camera", "pose_camera", "has_base", "center_base", "axis_base", "pose_base", "length_m", "diameter_m", "confidence", "method", "n_depth_points")
     CENTER_CAMERA_FIELD_NUMBER: _ClassVar[int]
@@ -78,7 +100,7 @@ class RodDetection(_message.Message):
     def __init__(self, center_camera: _Optional[_Union[Vec3, _Mapping]] = ..., axis_camera: _Optional[_Union[Vec3, _Mapping]] = ..., pose_camera: _Optional[_Union[_common_pb2.Pose, _Mapping]] = ..., has_base: _Optional[bool] = ..., center_base: _Optional[_Union[Vec3, _Mapping]] = ..., axis_base: _Optional[_Union[Vec3, _Mapping]] = ..., pose_base: _Optional[_Union[_common_pb2.Pose, _Mapping]] = ..., length_m: _Optional[float] = ..., diameter_m: _Optional[float] = ..., confidence: _Optional[float] = ..., method: _Optional[str] = ..., n_depth_points: _Optional[int] = ...) -> None: ...
 
 class CubeDetection(_message.Message):
-    __slots__ = ("centroid_camera", "pose_camera", "has_base", "centroid_base", "pose_base", "color_label", "n_points")
+    __slots__ = ("centroid_camera", "pose_camera", "has_base", "centroid_base", "pose_base", "color_label", "n_points", "visibility", "mean_rgb", "fit_rms_m", "hidden_fraction")
     CENTROID_CAMERA_FIELD_NUMBER: _ClassVar[int]
     POSE_CAMERA_FIELD_NUMBER: _ClassVar[int]
     HAS_BASE_FIELD_NUMBER: _ClassVar[int]
@@ -86,6 +108,10 @@ class CubeDetection(_message.Message):
     POSE_BASE_FIELD_NUMBER: _ClassVar[int]
     COLOR_LABEL_FIELD_NUMBER: _ClassVar[int]
     N_POINTS_FIELD_NUMBER: _ClassVar[int]
+    VISIBILITY_FIELD_NUMBER: _ClassVar[int]
+    MEAN_RGB_FIELD_NUMBER: _ClassVar[int]
+    FIT_RMS_M_FIELD_NUMBER: _ClassVar[int]
+    HIDDEN_FRACTION_FIELD_NUMBER: _ClassVar[int]
     centroid_camera: Vec3
     pose_camera: _common_pb2.Pose
     has_base: bool
@@ -93,7 +119,11 @@ class CubeDetection(_message.Message):
     pose_base: _common_pb2.Pose
     color_label: str
     n_points: int
-    def __init__(self, centroid_camera: _Optional[_Union[Vec3, _Mapping]] = ..., pose_camera: _Optional[_Union[_common_pb2.Pose, _Mapping]] = ..., has_base: _Optional[bool] = ..., centroid_base: _Optional[_Union[Vec3, _Mapping]] = ..., pose_base: _Optional[_Union[_common_pb2.Pose, _Mapping]] = ..., color_label: _Optional[str] = ..., n_points: _Optional[int] = ...) -> None: ...
+    visibility: Visibility
+    mean_rgb: Rgb
+    fit_rms_m: float
+    hidden_fraction: float
+    def __init__(self, centroid_camera: _Optional[_Union[Vec3, _Mapping]] = ..., pose_camera: _Optional[_Union[_common_pb2.Pose, _Mapping]] = ..., has_base: _Optional[bool] = ..., centroid_base: _Optional[_Union[Vec3, _Mapping]] = ..., pose_base: _Optional[_Union[_common_pb2.Pose, _Mapping]] = ..., color_label: _Optional[str] = ..., n_points: _Optional[int] = ..., visibility: _Optional[_Union[Visibility, str]] = ..., mean_rgb: _Optional[_Union[Rgb, _Mapping]] = ..., fit_rms_m: _Optional[float] = ..., hidden_fraction: _Optional[float] = ...) -> None: ...
 
 class BoxBounds(_message.Message):
     __slots__ = ("min", "max")
@@ -104,18 +134,24 @@ class BoxBounds(_message.Message):
     def __init__(self, min: _Optional[_Union[Vec3, _Mapping]] = ..., max: _Optional[_Union[Vec3, _Mapping]] = ...) -> None: ...
 
 class ObstacleBox(_message.Message):
-    __slots__ = ("camera", "has_base", "base", "color_label", "n_points")
+    __slots__ = ("camera", "has_base", "base", "color_label", "n_points", "visibility", "mean_rgb", "recognised")
     CAMERA_FIELD_NUMBER: _ClassVar[int]
     HAS_BASE_FIELD_NUMBER: _ClassVar[int]
     BASE_FIELD_NUMBER: _ClassVar[int]
     COLOR_LABEL_FIELD_NUMBER: _ClassVar[int]
     N_POINTS_FIELD_NUMBER: _ClassVar[int]
+    VISIBILITY_FIELD_NUMBER: _ClassVar[int]
+    MEAN_RGB_FIELD_NUMBER: _ClassVar[int]
+    RECOGNISED_FIELD_NUMBER: _ClassVar[int]
     camera: BoxBounds
     has_base: bool
     base: BoxBounds
     color_label: str
     n_points: int
-    def __init__(self, camera: _Optional[_Union[BoxBounds, _Mapping]] = ..., has_base: _Optional[bool] = ..., base: _Optional[_Union[BoxBounds, _Mapping]] = ..., color_label: _Optional[str] = ..., n_points: _Optional[int] = ...) -> None: ...
+    visibility: Visibility
+    mean_rgb: Rgb
+    recognised: bool
+    def __init__(self, camera: _Optional[_Union[BoxBounds, _Mapping]] = ..., has_base: _Optional[bool] = ..., base: _Optional[_Union[BoxBounds, _Mapping]] = ..., color_label: _Optional[str] = ..., n_points: _Optional[int] = ..., visibility: _Optional[_Union[Visibility, str]] = ..., mean_rgb: _Optional[_Union[Rgb, _Mapping]] = ..., recognised: _Optional[bool] = ...) -> None: ...
 
 class DetectedObjects(_message.Message):
     __slots__ = ("header", "rods", "cubes", "obstacles", "timings_ms", "notes", "rod_detected", "calibrated")

@@ -32,7 +32,7 @@ class Model(BaseModel):
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
-CubeColor = Literal["red", "blue", "green", "black"]
+CubeColor = Literal["red", "blue", "green", "black", "yellow"]
 ALL_CUBE_COLORS: tuple[CubeColor, ...] = ("red", "blue", "green", "black")
 # seed 004's colour-keyed drop zones (base frame, m): where grasp puts the cubes and the twin marks them
 DEFAULT_DROP_ZONES_M: dict[str, tuple[float, float]] = {
@@ -40,6 +40,7 @@ DEFAULT_DROP_ZONES_M: dict[str, tuple[float, float]] = {
     "blue": (0.45, 0.45),
     "green": (0.30, -0.45),
     "black": (0.45, -0.45),
+    "yellow": (0.60, 0.45),  # the colour table's fifth colour: the +y row continued
 }
 
 Vec6 = tuple[float, float, float, float, float, float]

@@ -121,6 +121,14 @@ class CubeDetectionSettings(Model):
     # Safety first: whatever stands on the table and is neither a cube nor a rod goes into the planning
     # scene as an obstacle box, whatever its colour or size (false = only the obstacle rule's boxes).
     unrecognised_as_obstacles: bool = True
+    # Occlusion: a cube whose camera-facing surface is hidden by something nearer is fitted from the
+    # faces that are seen; above this hidden share its centre is not trusted (an obstacle, not a target).
+    occlusion_depth_margin_m: float = Field(
+        0.01, gt=0, le=0.1, description="measured depth this much nearer than the fitted face = hidden"
+    )
+    occluded_max_fraction: float = Field(
+        0.3, ge=0, le=1, description="hidden share of the visible faces above which a cube is not pickable"
+    )
 
     @model_validator(mode="after")
     def _range(self) -> CubeDetectionSettings:

@@ -32,6 +32,7 @@ COLORS_RGBA: dict[str, tuple[float, float, float, float]] = {
     "blue": (0.08, 0.20, 0.80, 1.0),
     "green": (0.10, 0.62, 0.20, 1.0),
     "black": (0.05, 0.05, 0.05, 1.0),
+    "yellow": (0.85, 0.74, 0.15, 1.0),
 }
 
 
