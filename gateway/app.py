@@ -28,7 +28,7 @@ from gateway.clients import CellClients
 from gateway.convert import pick_row, validate_pick_event
 from gateway.db import migrate
 from gateway.db.engine import database_url, make_engine, redact, session_factory
-from gateway.db.repository import HealthRepository, insert_picks
+from gateway.db.repository import HealthRepository, PickRepository, insert_picks
 from gateway.feeds import BusFeeds
 from gateway.live import LiveHub
 from gateway.persist import PickBuffer, PickWriter, WrittenPick
@@ -97,6 +97,21 @@ async def _poll_robot_status(cell: Cell) -> None:
         await asyncio.sleep(period)
 
 
+async def _status_counts(cell: Cell, written: asyncio.Event) -> None:
+    """Today's picks for the status snapshot: every status_db_period_s, and after picks are written."""
+
+    async def today() -> tuple[int, int]:
+        async with cell.sessions() as s:
+            return await PickRepository(s).today(datetime.now(UTC))
+
+    while True:
+        await cell.status.refresh_counts(today)
+        written.clear()
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(cell.settings.gateway.status_db_period_s):
+                await written.wait()
+
+
 async def _republish_config(cell: Cell) -> None:
     """Repeat the accepted changes now and then, for a service that (re)started after the PUT."""
     while True:
@@ -150,9 +165,11 @@ def create_app(
         spill = repo_path(gw.pick_spill_file) if gw.pick_spill_file else None
         buffer = PickBuffer(gw.pick_buffer_size, spill)
         cache = ReadCache(ttl_s=2.0)
+        picks_written = asyncio.Event()
 
         def on_written(picks: list[WrittenPick]) -> None:
             cache.clear()
+            picks_written.set()
             for p in picks:
                 ev = p.event
                 metrics.observe_pick(
@@ -187,6 +204,7 @@ def create_app(
                 settings, engine, sessions, display, hub, writer, clients, metrics, calibration, cache
             )
             app.state.cell = cell
+            hub.on_change = lambda _kind: cell.status.invalidate()
             app.state.api_token = gw.api_token.get_secret_value() if gw.api_token else ""
 
             def on_pick_event(ev: task_pb2.PickEvent) -> None:
@@ -254,6 +272,7 @@ def create_app(
                 ("gateway-robot-status", _poll_robot_status(cell)),
                 ("gateway-health", _sample_health(cell)),
                 ("gateway-config", _republish_config(cell)),
+                ("gateway-status-counts", _status_counts(cell, picks_written)),
             ):
                 cell.spawn(coro, name)
             log.info("gateway ready: database %s, cell %s", display, settings.cell_id)
@@ -266,6 +285,7 @@ def create_app(
         version="1.0.0",
         description="REST API of the pickplace cell (LLD §13.1). Mutating requests need a bearer token.",
         lifespan=lifespan,
+        generate_unique_id_function=lambda route: route.name,  # operationIds the links name
     )
     app.state.ready = asyncio.Event()
     app.state.startup_error = None

@@ -20,7 +20,7 @@ from sqlalchemy.ext.asyncio import AsyncSession, async_sessionmaker
 from gateway.db.models import Calibration
 from gateway.db.repository import CalibrationRepository
 from gateway.schemas import CalibrationStatus
-from services.common.errors import ExecutionError, RobotCommunicationError, RobotError
+from services.common.errors import ConfigurationError, ExecutionError, RobotError
 
 log = logging.getLogger("pickplace.gateway.calibration")
 
@@ -67,8 +67,9 @@ class CalibrationRuns:
 
     async def start(self, num_poses: int) -> CalibrationRun:
         if self.executor is None:
-            raise RobotCommunicationError(
-                "no hand-eye calibration routine is connected to this gateway (the vision service provides it)"
+            raise ConfigurationError(
+                "no hand-eye calibration routine is connected to this gateway: `pickplace up` provides one; "
+                "elsewhere run `pickplace calibrate` against the cell"
             )
         running = self.active()
         if running is not None:

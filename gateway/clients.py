@@ -123,10 +123,14 @@ class CellClients(ServiceShell):
                 task_pb2.StopTaskRequest(), timeout=self.timeout_s, wait_for_ready=True
             )
 
-    async def task_status(self) -> task_pb2.TaskStatus:
+    async def task_status(self, wait_for_ready: bool = False) -> task_pb2.TaskStatus:
+        """``wait_for_ready``: before a command, wait (up to the timeout) for a channel still
+        backing off after a restart, as the command itself would."""
         assert self.task is not None
-        with _relay_errors("task service", self.task_target):
-            return await self.task.GetStatus(task_pb2.GetTaskStatusRequest(), timeout=self.timeout_s)
+        with _relay_errors("task service", self.task_target, self.task_channel, self.timeout_s):
+            return await self.task.GetStatus(
+                task_pb2.GetTaskStatusRequest(), timeout=self.timeout_s, wait_for_ready=wait_for_ready
+            )
 
     # ---------------------------------------------------------------- robot driver
     async def robot_status(self) -> robot_pb2.RobotStatus:

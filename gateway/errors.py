@@ -7,6 +7,7 @@ errors add ``"errors": [{"field": "body.robot.speed_ratio", "message": …}]``.
 from __future__ import annotations
 
 import logging
+import re
 from typing import Any
 
 from fastapi import FastAPI, Request
@@ -39,8 +40,13 @@ HTTP_ERROR_NAMES = {
     405: "MethodNotAllowed",
     409: "Conflict",
     413: "RequestTooLarge",
+    415: "UnsupportedMediaType",
+    422: "ValidationError",
     503: "ServiceUnavailable",
 }
+
+
+HTTP_METHODS = {"get", "put", "post", "delete", "options", "head", "patch", "trace"}
 
 
 def status_for(exc: E.RobotError) -> int:
@@ -64,6 +70,23 @@ def validation_body(errors: list[dict[str, Any]]) -> dict[str, Any]:
     return error_body("ValidationError", detail, errors=items)
 
 
+def allowed_methods(app: FastAPI, path: str) -> list[str]:
+    """The methods the OpenAPI document lists for this path (Starlette's own 405 names only those of
+    the first route that matched); a literal path wins over a template (/calibration/handshake)."""
+    table: list[tuple[re.Pattern[str], bool, list[str]]] | None = getattr(app.state, "allow_table", None)
+    if table is None:
+        table = []
+        for template, ops in app.openapi().get("paths", {}).items():
+            pattern = re.sub(r"\\\{[^}]+\\\}", "[^/]+", re.escape(template))
+            methods = sorted(m.upper() for m in ops if m in HTTP_METHODS)
+            table.append((re.compile(f"^{pattern}$"), "{" not in template, methods))
+        app.state.allow_table = table
+    matching = [(literal, methods) for rx, literal, methods in table if rx.match(path)]
+    literal = [m for is_literal, m in matching if is_literal]
+    chosen = literal or [m for _, m in matching]
+    return sorted({m for methods in chosen for m in methods})
+
+
 def install(app: FastAPI) -> None:
     @app.exception_handler(E.RobotError)
     async def _robot_error(_req: Request, exc: E.RobotError) -> JSONResponse:
@@ -79,12 +102,13 @@ def install(app: FastAPI) -> None:
         return JSONResponse(validation_body(list(exc.errors())), status_code=422)
 
     @app.exception_handler(StarletteHTTPException)
-    async def _http(_req: Request, exc: StarletteHTTPException) -> JSONResponse:
+    async def _http(req: Request, exc: StarletteHTTPException) -> JSONResponse:
         name = HTTP_ERROR_NAMES.get(exc.status_code, "HTTPError")
+        headers = dict(getattr(exc, "headers", None) or {})
+        if exc.status_code == 405:
+            headers["Allow"] = ", ".join(allowed_methods(app, req.scope["path"]))
         return JSONResponse(
-            error_body(name, str(exc.detail)),
-            status_code=exc.status_code,
-            headers=getattr(exc, "headers", None),
+            error_body(name, str(exc.detail)), status_code=exc.status_code, headers=headers or None
         )
 
     @app.exception_handler(sa_exc.SQLAlchemyError)
@@ -109,5 +133,8 @@ def install(app: FastAPI) -> None:
 
     @app.exception_handler(Exception)
     async def _unexpected(_req: Request, exc: Exception) -> JSONResponse:
+        # a bug: logged with its traceback here, never shown to the client
         log.exception("unhandled error in request")
-        return JSONResponse(error_body(type(exc).__name__, str(exc) or "internal error"), status_code=500)
+        return JSONResponse(
+            error_body("InternalError", "internal error (see the gateway's log)"), status_code=500
+        )

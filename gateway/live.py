@@ -10,7 +10,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any
 
 from pickplace.v1 import common_pb2, robot_pb2, task_pb2
@@ -61,6 +61,7 @@ class LiveHub:
         self.camera_jpeg: bytes | None = None
         self.camera_seq = 0
         self.sent = 0
+        self.on_change: Callable[[str], None] | None = None  # every non-joint message (the status snapshot)
 
     def set_joint_rate(self, rate_hz: float) -> None:
         self._min_joint_interval_ns = int(1e9 / rate_hz)
@@ -140,6 +141,8 @@ class LiveHub:
         return len(self._queues)
 
     def _broadcast(self, message: Message) -> None:
+        if self.on_change is not None and message["type"] != "joint_state":
+            self.on_change(message["type"])
         for q in list(self._queues):
             if q.full():
                 with contextlib.suppress(asyncio.QueueEmpty):

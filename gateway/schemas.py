@@ -8,6 +8,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from gateway.contract import JsonInt
 from services.common.modes import TaskKind
 
 
@@ -76,7 +77,7 @@ class SystemStatus(BaseModel):
 
 class StartRequest(Strict):
     task: TaskKind = TaskKind.STAND_ROD
-    cycles: int = Field(0, ge=0, le=100_000, description="0 = until stopped")
+    cycles: JsonInt = Field(0, ge=0, le=100_000, description="0 = until stopped")
 
 
 class PoseJson(BaseModel):
@@ -131,7 +132,7 @@ class MetricsSummary(BaseModel):
 
 
 class CalibrationRequest(Strict):
-    num_poses: int = Field(15, ge=3, le=200)
+    num_poses: JsonInt = Field(15, ge=3, le=200)
 
 
 class CalibrationStarted(BaseModel):

@@ -7,7 +7,8 @@ import json
 import secrets
 from typing import Any
 
-from fastapi import HTTPException, Request, status
+from fastapi import Depends, HTTPException, Request, status
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 TOKEN_BYTES = 32
@@ -31,7 +32,14 @@ def bearer_from_header(value: str | None) -> str | None:
     return token.strip() if scheme.lower() == "bearer" and token.strip() else None
 
 
-def require_token(request: Request) -> None:
+# Declares the scheme in the OpenAPI document (securitySchemes.bearerAuth and each route's security);
+# auto_error off: the 401 below says what to send.
+BEARER = HTTPBearer(scheme_name="bearerAuth", description="gateway.api_token", auto_error=False)
+
+
+def require_token(
+    request: Request, _credentials: HTTPAuthorizationCredentials | None = Depends(BEARER)
+) -> None:
     """FastAPI dependency: 401 unless ``Authorization: Bearer <gateway.api_token>``."""
     expected: str = request.app.state.api_token
     presented = bearer_from_header(request.headers.get("authorization"))

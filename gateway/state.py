@@ -22,6 +22,7 @@ from gateway.calibration import CalibrationRuns
 from gateway.clients import CellClients
 from gateway.live import LiveHub
 from gateway.persist import PickWriter
+from gateway.status import TASK_STATUS_FRESH_S, StatusBoard
 from services.common.bus import Bus
 from services.common.keys import CellKeys
 from services.common.metrics import CellMetrics
@@ -61,7 +62,18 @@ class Cell:
     edge_port: int | None = None
     bus: Bus | None = None
     config_patch: dict[str, Any] = field(default_factory=dict)  # every change PUT /config accepted
+    status: StatusBoard = field(init=False)
     _jobs: set[asyncio.Task[None]] = field(default_factory=set)
+
+    def __post_init__(self) -> None:
+        self.status = StatusBoard(self, self.settings.gateway.status_period_s)
+
+    def task_running(self) -> bool:
+        """The task service's last report (while fresh) says it runs."""
+        if self.hub.task_status is None or self.task_status_at is None:
+            return False
+        fresh = time.monotonic() - self.task_status_at <= TASK_STATUS_FRESH_S
+        return fresh and bool(self.hub.task_status.get("running"))
 
     def spawn(self, coro: Coroutine[Any, Any, Any], name: str) -> asyncio.Task[None]:
         """A background job in the gateway's task group, cancelled when the gateway stops."""

@@ -10,11 +10,14 @@ from typing import Any
 
 from fastapi import APIRouter, Body
 
+from gateway.contract import MUTATE, config_patch_model, patch_document
 from gateway.deps import Authorized, CellDep
 from gateway.schemas import ConfigUpdateResult
 from services.common.config_patch import UPDATABLE, apply_patch, merge_patches, when_applied
 
 router = APIRouter(prefix="/config", tags=["config"])
+
+ConfigPatch = config_patch_model()
 
 
 @router.get("")
@@ -27,11 +30,16 @@ async def get_config(cell: CellDep) -> dict[str, Any]:
     return doc
 
 
-@router.put("", response_model=ConfigUpdateResult, dependencies=Authorized)
+@router.put("", response_model=ConfigUpdateResult, dependencies=Authorized, responses=MUTATE)
 async def put_config(
-    cell: CellDep, patch: Any = Body(..., examples=[{"robot": {"speed_ratio": 30}}])
+    cell: CellDep,
+    body: ConfigPatch = Body(..., examples=[{"robot": {"speed_ratio": 30}}]),  # type: ignore[valid-type]
 ) -> ConfigUpdateResult:
-    """Apply a partial settings document. 422 names every refused field; nothing changes then."""
+    """Apply a partial settings document. 422 names every refused field; nothing changes then.
+
+    Each section is validated as a whole (a workspace whose min is not below its max, a drop zone
+    for every cube colour), so a document the schema allows can still be refused with 422."""
+    patch = patch_document(body)
     new, changed = apply_patch(cell.settings, patch)
     cell.settings = new
     if changed:

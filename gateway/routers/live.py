@@ -7,8 +7,8 @@ import contextlib
 import json
 
 from fastapi import APIRouter, HTTPException, Response, WebSocket, WebSocketDisconnect
-from fastapi.responses import PlainTextResponse
 
+from gateway.contract import errors
 from gateway.deps import CellDep
 from services.common.settings import CONFIG_DIR
 
@@ -50,7 +50,14 @@ async def _drain_client(ws: WebSocket) -> None:
             await ws.receive_text()
 
 
-@router.get("/camera/latest.jpg", responses={200: {"content": {"image/jpeg": {}}}})
+@router.get(
+    "/camera/latest.jpg",
+    response_class=Response,
+    responses={
+        200: {"content": {"image/jpeg": {"schema": {"type": "string", "format": "binary"}}}},
+        **errors(404),
+    },
+)
 async def camera(cell: CellDep) -> Response:
     """The vision service's latest debug image (detections drawn on it)."""
     if cell.hub.camera_jpeg is None:
@@ -58,11 +65,15 @@ async def camera(cell: CellDep) -> Response:
     return Response(cell.hub.camera_jpeg, media_type="image/jpeg", headers={"Cache-Control": "no-store"})
 
 
-@router.get("/robot/urdf", response_class=PlainTextResponse)
-async def robot_urdf(cell: CellDep) -> PlainTextResponse:
+@router.get(
+    "/robot/urdf",
+    response_class=Response,
+    responses={200: {"content": {"application/xml": {"schema": {"type": "string"}}}}, **errors(404)},
+)
+async def robot_urdf(cell: CellDep) -> Response:
     """The URDF of the configured robot model, for the dashboard's 3D view."""
     model = cell.settings.robot.model
     path = CONFIG_DIR / "robots" / f"{model}.urdf"
     if not path.exists():
         raise HTTPException(404, f"no URDF for robot model {model!r} at {path}")
-    return PlainTextResponse(path.read_text(), media_type="application/xml")
+    return Response(path.read_text(), media_type="application/xml")

@@ -6,13 +6,14 @@ from datetime import UTC, datetime
 
 from fastapi import APIRouter
 
+from gateway.contract import READ_DB
 from gateway.deps import CellDep, PicksDep
 from gateway.schemas import MetricsSummary
 
 router = APIRouter(tags=["metrics"])
 
 
-@router.get("/metrics", response_model=MetricsSummary)
+@router.get("/metrics", response_model=MetricsSummary, responses=READ_DB)
 async def summary(cell: CellDep, repo: PicksDep) -> MetricsSummary:
     s = await cell.cache.get(("summary",), lambda: repo.summary(datetime.now(UTC)))
     return MetricsSummary(

@@ -6,6 +6,7 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, HTTPException, Path, Query, Response
 
+from gateway.contract import LARGEST_ID, READ_DB, errors, pick_links
 from gateway.deps import CellDep, PicksDep
 from gateway.records import RECORD_FIELDS, pick_detail, with_utc
 from gateway.schemas import PickDetail, PickRecord
@@ -13,7 +14,17 @@ from gateway.schemas import PickDetail, PickRecord
 router = APIRouter(prefix="/picks", tags=["picks"])
 
 
-@router.get("", response_model=list[PickRecord])
+@router.get(
+    "",
+    response_model=list[PickRecord],
+    responses={
+        **READ_DB,
+        200: {
+            "links": pick_links(),
+            "headers": {"X-Total-Count": {"description": "matching picks", "schema": {"type": "integer"}}},
+        },
+    },
+)
 async def list_picks(
     repo: PicksDep,
     cell: CellDep,
@@ -32,9 +43,9 @@ async def list_picks(
     return [with_utc(r) for r in rows]  # rows, not models: validated once, by the response model
 
 
-@router.get("/{pick_id}", response_model=PickDetail)
+@router.get("/{pick_id}", response_model=PickDetail, responses={**READ_DB, **errors(404)})
 async def get_pick(
-    repo: PicksDep, pick_id: Annotated[int, Path(ge=1, description="the pick's row id")]
+    repo: PicksDep, pick_id: Annotated[int, Path(ge=1, le=LARGEST_ID, description="the pick's row id")]
 ) -> PickDetail:
     row = await repo.get(pick_id)
     if row is None:

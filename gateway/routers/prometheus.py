@@ -11,7 +11,11 @@ from services.common.metrics import render
 router = APIRouter(tags=["prometheus"])
 
 
-@router.get("/metrics", include_in_schema=True, response_class=Response)
+@router.get(
+    "/metrics",
+    response_class=Response,
+    responses={200: {"content": {"text/plain": {"schema": {"type": "string"}}}, "description": "exposition"}},
+)
 async def prometheus_metrics(cell: CellDep) -> Response:
     cell.metrics.pick_buffer_depth.set(len(cell.writer.buffer))
     return Response(render(cell.metrics.registry), media_type=CONTENT_TYPE_LATEST)

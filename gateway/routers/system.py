@@ -4,22 +4,15 @@ from __future__ import annotations
 
 import logging
 import time
-from datetime import UTC, datetime
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING
 
-from fastapi import APIRouter, Body
+from fastapi import APIRouter, Body, Response
 
-from gateway.db.repository import PickRepository
+from gateway.contract import COMMAND, MUTATE
 from gateway.deps import Authorized, CellDep
-from gateway.schemas import (
-    CommandResult,
-    EstopResult,
-    HealthSummary,
-    RobotSummary,
-    StartRequest,
-    SystemStatus,
-    TaskSummary,
-)
+from gateway.schemas import CommandResult, EstopResult, StartRequest, SystemStatus
+from gateway.status import cell_state_of, robot_summary, task_summary
+from services.common.errors import ExecutionError, RobotBusyError
 
 if TYPE_CHECKING:
     from gateway.state import Cell
@@ -27,84 +20,41 @@ if TYPE_CHECKING:
 log = logging.getLogger("pickplace.gateway.system")
 router = APIRouter(prefix="/system", tags=["system"])
 
-# The task service publishes its status at 2 Hz; older than this and it is taken as gone.
-TASK_STATUS_FRESH_S = 5.0
-
-
-def _robot_summary(cell: Cell) -> RobotSummary:
-    return RobotSummary(**(cell.hub.robot_status or {"connected": False, "error": "no status yet"}))
-
-
-def _task_summary(cell: Cell) -> TaskSummary | None:
-    if cell.hub.task_status is None or cell.task_status_at is None:
-        return None
-    age = time.monotonic() - cell.task_status_at
-    fields = {k: v for k, v in cell.hub.task_status.items() if k in TaskSummary.model_fields}
-    return TaskSummary(**fields, age_s=round(age, 3))
-
-
-def _state(robot: RobotSummary, task: TaskSummary | None) -> str:
-    """E-stop first; then the task's state while it reports; else whether the robot answers."""
-    if robot.estop_active:
-        return "ESTOP"
-    if task is not None and (task.age_s or 0) <= TASK_STATUS_FRESH_S:
-        return task.state or "UNKNOWN"
-    return "IDLE" if robot.connected else "OFFLINE"
-
 
 def cell_state(cell: Cell) -> str:
-    return _state(_robot_summary(cell), _task_summary(cell))
+    age = None if cell.task_status_at is None else time.monotonic() - cell.task_status_at
+    return cell_state_of(robot_summary(cell.hub.robot_status), task_summary(cell.hub.task_status, age))
 
 
 @router.get("/status", response_model=SystemStatus)
-async def get_status(cell: CellDep) -> SystemStatus:
-    """The cell at a glance. Answers even while the database or a service is down."""
-    robot, task = _robot_summary(cell), _task_summary(cell)
-    state = _state(robot, task)
-    picks_today, success_rate = 0, None
-    db_state: Literal["ok", "unavailable"] = "ok"
-    try:
-
-        async def today() -> tuple[int, int]:
-            async with cell.sessions() as s:
-                return await PickRepository(s).today(datetime.now(UTC))
-
-        total, ok = await cell.cache.get(("today",), today)
-        picks_today, success_rate = total, (ok / total if total else None)
-    except Exception as exc:  # the status page must not go dark with the database
-        log.debug("status without database: %s", exc)
-        db_state = "unavailable"
-    if not cell.writer.database_ok:
-        db_state = "unavailable"
-    return SystemStatus(
-        state=state,
-        uptime=round(cell.uptime_s, 3),
-        picks_today=picks_today,
-        success_rate=success_rate,
-        task=task,
-        robot=robot,
-        database=db_state,
-        pick_buffer=len(cell.writer.buffer),
-        health=HealthSummary(**cell.health) if cell.health else None,
-    )
+async def get_status(cell: CellDep) -> Response:
+    """The cell at a glance, from the snapshot the gateway keeps (no database query, no service asked).
+    Answers even while the database or a service is down."""
+    return Response(cell.status.json(), media_type="application/json")
 
 
-@router.post("/start", response_model=CommandResult, dependencies=Authorized)
+@router.post("/start", response_model=CommandResult, dependencies=Authorized, responses=COMMAND)
 async def start(cell: CellDep, body: StartRequest | None = Body(None)) -> CommandResult:
-    """Start the task (relayed to the task service; 503 when it is unreachable)."""
+    """Start the task (relayed to the task service). 409 when it already runs or refuses to start
+    (an e-stop to release first); 503 when it is unreachable."""
     req = body or StartRequest()
+    status = await cell.clients.task_status(wait_for_ready=True)
+    if status.running:
+        raise RobotBusyError(f"the task is already running ({status.state}); stop it first")
     r = await cell.clients.start_task(req.task, req.cycles)
+    if not r.success:
+        raise ExecutionError(f"the task service did not start: {r.message}")
     return CommandResult(success=r.success, message=r.message)
 
 
-@router.post("/stop", response_model=CommandResult, dependencies=Authorized)
+@router.post("/stop", response_model=CommandResult, dependencies=Authorized, responses=MUTATE)
 async def stop(cell: CellDep) -> CommandResult:
     """Stop the task after the current motion (relayed to the task service)."""
     r = await cell.clients.stop_task()
     return CommandResult(success=r.success, message=r.message)
 
 
-@router.post("/estop", response_model=EstopResult, dependencies=Authorized)
+@router.post("/estop", response_model=EstopResult, dependencies=Authorized, responses=MUTATE)
 async def estop(cell: CellDep) -> EstopResult:
     """Emergency stop: straight to the robot driver on its own channel; the task service is told too."""
     t0 = time.perf_counter()
@@ -119,7 +69,7 @@ async def estop(cell: CellDep) -> EstopResult:
     return EstopResult(success=r.success, message=r.message, latency_ms=latency_ms)
 
 
-@router.post("/estop/release", response_model=CommandResult, dependencies=Authorized)
+@router.post("/estop/release", response_model=CommandResult, dependencies=Authorized, responses=COMMAND)
 async def estop_release(cell: CellDep) -> CommandResult:
     """Release the software e-stop, clear the alarms and enable the arm (not in the LLD; the dashboard's reset)."""
     await cell.clients.release_estop()

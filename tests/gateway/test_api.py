@@ -209,13 +209,19 @@ async def test_put_config_validates_and_applies(settings, sqlite_db, tmp_path):
     async with running_gateway(gateway_settings(settings, sqlite_db, tmp_path)) as gw:
         c = gw.client
         cases = [
-            ({"robot": {"speed_ratio": 150}}, "robot.speed_ratio", "1-100"),
-            ({"robot": {"speed_ratio": "fast"}}, "robot.speed_ratio", "integer"),
-            ({"robot": {"workspace": {"min": [0.5, 0, 0], "max": [0.1, 1, 1]}}}, "robot.workspace", "below"),
-            ({"robot": {"host": "10.0.0.5"}}, "robot.host", "cannot be changed"),
-            ({"gateway": {"api_token": "x" * 20}}, "gateway.api_token", "cannot be changed"),
-            ({"motion": {"velocity_scale": 1.5}}, "motion.velocity_scale", "less than or equal"),
-            ({"nonsense": 1}, "nonsense", "cannot be changed"),
+            ({"robot": {"speed_ratio": 150}}, "body.robot.speed_ratio", "less than or equal to 100"),
+            ({"robot": {"speed_ratio": "fast"}}, "body.robot.speed_ratio", "integer"),
+            ({"robot": {"speed_ratio": True}}, "body.robot.speed_ratio", "integer"),  # a bool is no number
+            (
+                {"robot": {"workspace": {"min": [0.5, 0, 0], "max": [0.1, 1, 1]}}},
+                "body.robot.workspace",
+                "below",
+            ),
+            ({"robot": {"host": "10.0.0.5"}}, "body.robot", "robot.host cannot be changed"),
+            ({"gateway": {"api_token": "x" * 20}}, "body.gateway", "gateway.api_token cannot be changed"),
+            ({"motion": {"velocity_scale": 1.5}}, "body.motion.velocity_scale", "less than or equal"),
+            ({"nonsense": 1}, "body", "nonsense cannot be changed"),
+            ({"robot": {}}, "body.robot", "at least one"),
         ]
         for patch, field, words in cases:
             r = await c.put("/api/v1/config", json=patch, headers=AUTH)
@@ -346,11 +352,11 @@ async def test_calibration_run_progress_and_record(settings, sqlite_db, tmp_path
     )
 
 
-async def test_calibration_without_routine_is_503(settings, sqlite_db, tmp_path):
+async def test_calibration_without_routine_is_409(settings, sqlite_db, tmp_path):
     await migrate_up(sqlite_db)
     async with running_gateway(gateway_settings(settings, sqlite_db, tmp_path)) as gw:
         r = await gw.client.post("/api/v1/calibration/handshake", headers=AUTH)
-        assert r.status_code == 503 and "calibration routine" in r.json()["detail"]
+        assert r.status_code == 409 and "calibration routine" in r.json()["detail"]
 
 
 async def test_refuses_unmigrated_database_and_missing_token(settings, sqlite_db, tmp_path):

@@ -18,9 +18,15 @@ class GatewaySettings(Model):
     api_token: SecretStr | None = None
     cors_origins: list[str] = Field(default_factory=list, description="empty = CORS closed")
     max_request_bytes: int = Field(65536, ge=1024, le=16 * 1024 * 1024)
-    joint_state_rate_hz: float = Field(20.0, gt=0, le=125, description="joint states sent to browsers")
+    joint_state_rate_hz: float = Field(20.0, ge=0.1, le=125, description="joint states sent to browsers")
     robot_status_period_s: float = Field(0.5, ge=0.05, le=60)
     health_period_s: float = Field(10.0, ge=0.1, le=3600)
+    status_period_s: float = Field(
+        0.1, gt=0, le=10, description="GET /system/status snapshot: rebuilt at least this often"
+    )
+    status_db_period_s: float = Field(
+        1.0, gt=0, le=60, description="how often the status snapshot reads today's picks"
+    )
     robot_id: str = Field("robot_01", pattern=r"^[A-Za-z0-9_\-]{1,50}$")
     pick_buffer_size: int = Field(
         1000, ge=1, le=1_000_000, description="picks held in memory while the DB is down"
