@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 WEB_DEPS := web/node_modules/.package-lock.json
 
-.PHONY: install run test test-fast lint proto bench clean browser up up-local compose-smoke
+.PHONY: install run test test-fast lint proto bench clean browser up up-local compose-smoke fuzz-api
 
 install: $(STAMP) $(WEB_DEPS) browser
 
@@ -42,6 +42,14 @@ proto: install
 
 bench: install
 	MUJOCO_GL=egl $(PY) -m bench
+
+# The gateway's API contract under schemathesis (all checks, all phases, stateful links) for 10 min
+# against a live gateway on loopback with a scripted task service and robot driver; the tests run a
+# short seeded slice of the same harness. Report in artifacts/fuzz-api/. FUZZ_SEED / FUZZ_TIME to vary.
+FUZZ_SEED ?= 1
+FUZZ_TIME ?= 600
+fuzz-api: install
+	$(PY) -m tests.gateway.fuzz_api --seed $(FUZZ_SEED) --max-examples 100000 --max-time $(FUZZ_TIME)
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache build *.egg-info web/node_modules
