@@ -18,11 +18,12 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-LIBRARIES = frozenset({"services.common", "services.kinematics", "services.dobot"})
+LIBRARIES = frozenset({"services.common", "services.kinematics", "services.dobot", "services.rtde"})
 ALLOWED: dict[str, frozenset[str]] = {
     "services.common": frozenset({"services.common"}),
     "services.kinematics": frozenset({"services.common", "services.kinematics"}),
     "services.dobot": frozenset({"services.common", "services.dobot"}),
+    "services.rtde": frozenset({"services.common", "services.rtde"}),
     "gateway": frozenset({"gateway", "services.common", "services.kinematics"}),
 }
 
