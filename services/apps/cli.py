@@ -16,6 +16,8 @@ from rich.table import Table
 
 from gateway.cli import db_app
 from services.apps.calibration_cli import app as calibration_app
+from services.apps.record_cli import app as record_app
+from services.apps.record_cli import record_overrides
 from services.apps.vision_cli import app as vision_app
 from services.common.aio import run_until_signal
 from services.common.bus import Bus
@@ -43,11 +45,15 @@ app.add_typer(db_app, name="db")  # the gateway's `pickplace db upgrade|downgrad
 app.add_typer(twin_app)  # sim-scene, sim-mjcf
 app.add_typer(vision_app)  # vision-detect, record
 app.add_typer(calibration_app)  # calibrate, calibrate-manual, calibration-check
+app.add_typer(record_app)  # replay
 console = Console()
 log = logging.getLogger("pickplace.cli")
 
 ProfileOpt = Annotated[str | None, typer.Option("--profile", "-p", help="config profile (sim, nova5-real)")]
 ConfigOpt = Annotated[str | None, typer.Option("--config", "-c", help="extra YAML config file")]
+FoxglovePortOpt = Annotated[int | None, typer.Option("--foxglove-port", help="Foxglove live view port (8765)")]
+NoFoxgloveOpt = Annotated[bool, typer.Option("--no-foxglove", help="no Foxglove live view")]
+RecordOpt = Annotated[str | None, typer.Option("--record", help="record MCAP files under this directory")]
 
 
 def _settings(
@@ -90,11 +96,14 @@ def up(
     processes: Annotated[
         bool, typer.Option("--processes", help="every service as its own OS process")
     ] = False,
+    foxglove_port: FoxglovePortOpt = None,
+    no_foxglove: NoFoxgloveOpt = False,
+    record: RecordOpt = None,
 ) -> None:
     """Run the whole cell: in one process (default) or as separate processes on loopback."""
     from services.apps.up import run_all_in_one
 
-    overrides: dict[str, Any] = {}
+    overrides: dict[str, Any] = {"record": record_overrides(foxglove_port, no_foxglove, record)}
     if task:
         overrides["task"] = {"task": task}
     if seed is not None:
@@ -220,7 +229,7 @@ def sim_dobot(
 
 
 # ---------------------------------------------------------------------------- serve
-SERVICES = ("robot", "motion", "grasp", "vision", "task", "gateway")
+SERVICES = ("robot", "motion", "grasp", "vision", "task", "gateway", "record")
 
 
 @app.command()
@@ -233,7 +242,10 @@ def serve(
     if service not in SERVICES:
         console.print(f"[red]unknown service {service!r}[/red]; available: {', '.join(SERVICES)}")
         raise typer.Exit(2)
-    s = _settings(profile, config)
+    foxglove_port: FoxglovePortOpt = None,
+    no_foxglove: NoFoxgloveOpt = False,
+    record: RecordOpt = None,
+    s = _settings(profile, config, record=record_overrides(foxglove_port, no_foxglove, record))
     from services.apps.probes import start_metrics_exporter
 
     start_metrics_exporter(s)  # off unless metrics.port is set (compose / Kubernetes)
@@ -250,6 +262,8 @@ def serve(
 
         _run(serve_task(s, between_cycles=_scene_reset_between_cycles(s)))
         return
+    elif service == "record":  # the live view and recorder of the cell (--foxglove-port, --record)
+        from services.apps.record_cli import serve_record as run
     else:
         from gateway.server import serve as run
     _run(run(s))

@@ -22,6 +22,7 @@ from rich.table import Table
 from rich.text import Text
 
 from services.apps.cell import Cell
+from services.apps.record_cli import cell_live_view
 from services.common.bus import Bus
 from services.common.settings import Settings
 from services.robot.demo_cycle import CycleEvent, CycleReport, run_keypose_cycle
@@ -102,6 +103,7 @@ async def run_pick_cell(
             _gw,
             url,
         ),
+        cell_live_view(cell, console),  # Foxglove live view and --record (record.*)
     ):
         runner = cell.task.runner  # type: ignore[union-attr]
         runner.listeners.append(last.append)

@@ -103,11 +103,13 @@ def iter_messages(path: str | Path, topics: list[str] | None = None) -> Iterator
     _check_bytes(p)
     try:
         with p.open("rb") as f:
-            for schema, channel, message in make_reader(f).iter_messages(topics=topics, log_time_order=True):
+            for schema, channel, message in make_reader(f, validate_crcs=True).iter_messages(
+                topics=topics, log_time_order=True
+            ):
                 yield RecordedMessage(
                     channel.topic, schema, channel.message_encoding, message.log_time, message.data
                 )
-    except (McapError, ValueError, EOFError) as exc:
+    except Exception as exc:  # the reader's, the decompressors' and the CRC check's errors alike
         raise InvalidInputError(f"{p} is a corrupt MCAP file: {exc}") from exc
 
 
