@@ -1,16 +1,22 @@
 """Gateway figures: requests/s and p50/p99 latency of GET /system/status and GET /picks with 100k picks
 in PostgreSQL, and e-stop latency (REST request → EmergencyStop received by the simulated Dobot).
 
-The gateway runs as its own process (``pickplace serve gateway``, as deployed); the load generator,
-the robot-driver service and the simulated Dobot run in this one. Everything on 127.0.0.1; the
-PostgreSQL schema is created for the run and dropped after it.
+The gateway runs as its own process (``pickplace serve gateway``, as deployed). The status figure
+comes from a load generator in a third process: wrk (Debian's ``wrk``; ``apt-get install wrk``) with
+16 connections for 10 s, or, without wrk, an httpx generator in a subprocess; target ≥ 3,000 req/s
+and p99 ≤ 10 ms. The other reads use an httpx generator in this process, next to the robot-driver
+service and the simulated Dobot. Everything on 127.0.0.1; the PostgreSQL schema is created for the
+run and dropped after it.
 """
 
 from __future__ import annotations
 
 import asyncio
+import json
 import logging
 import os
+import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -34,6 +40,9 @@ TOKEN = "bench-token-0123456789abcdef"
 CONCURRENCY = 16
 REQUESTS = 1000
 ESTOPS = 200
+STATUS_SECONDS = 10
+STATUS_TARGET_RPS = 3000
+STATUS_TARGET_P99_MS = 10.0
 
 
 def _pct(ms: list[float]) -> str:
@@ -90,7 +99,6 @@ def _start_gateway(db: DatabaseSettings, port: int, robot_port: int, tmp: Path) 
         "PICKPLACE_GATEWAY__PICK_SPILL_FILE": str(tmp / "spill.jsonl"),
         "PICKPLACE_GATEWAY__HEALTH_PERIOD_S": "60",
         "PICKPLACE_DATABASE__URL": db.url,
-        "PICKPLACE_DATABASE__SCHEMA_NAME": db.schema_name or "",
         "PICKPLACE_GRPC__ROBOT_PORT": str(robot_port),
         "PICKPLACE_GRPC__TASK_PORT": str(free_loopback_port()),
         "PICKPLACE_ZENOH__LISTEN": f'["tcp/127.0.0.1:{free_loopback_port()}"]',
@@ -98,13 +106,28 @@ def _start_gateway(db: DatabaseSettings, port: int, robot_port: int, tmp: Path) 
         "PICKPLACE_LOGGING__LEVEL": "WARNING",
     }
     env.pop("DATABASE_URL", None)
-    return subprocess.Popen(
-        [sys.executable, "-m", "services.apps.cli", "serve", "gateway"],
-        cwd=REPO_ROOT,
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-    )
+    if db.schema_name:
+        env["PICKPLACE_DATABASE__SCHEMA_NAME"] = db.schema_name
+    out_path = tmp / f"gateway-{port}.out"
+    with out_path.open("wb") as out:  # a configuration error is printed here
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "services.apps.cli", "serve", "gateway"],
+            cwd=REPO_ROOT,
+            env=env,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
+    GATEWAY_OUT[proc.pid] = out_path
+    return proc
+
+
+def gateway_output(proc: subprocess.Popen[bytes]) -> str:
+    """What a gateway started by :func:`_start_gateway` printed (it names a configuration error)."""
+    path = GATEWAY_OUT.get(proc.pid)
+    return path.read_text(errors="replace")[-2000:] if path is not None else ""
+
+
+GATEWAY_OUT: dict[int, Path] = {}
 
 
 async def _wait_up(url: str, proc: subprocess.Popen[bytes]) -> None:
@@ -112,9 +135,8 @@ async def _wait_up(url: str, proc: subprocess.Popen[bytes]) -> None:
         deadline = time.monotonic() + 30
         while time.monotonic() < deadline:
             if proc.poll() is not None:
-                raise RuntimeError(
-                    f"gateway exited: {proc.stderr.read().decode()[-2000:] if proc.stderr else ''}"
-                )
+                text = await asyncio.to_thread(gateway_output, proc)
+                raise RuntimeError(f"gateway exited (rc {proc.returncode}): {text}")
             try:
                 if (await c.get(url + "/api/v1/system/status")).status_code == 200:
                     return
@@ -144,6 +166,76 @@ async def _load(url: str, path: str) -> tuple[float, list[float]]:
         return REQUESTS / (time.perf_counter() - t0), lat
 
 
+def _wrk(url: str, seconds: int) -> tuple[float, float, float]:
+    """(req/s, p50 ms, p99 ms) of wrk -c16 against ``url``, one thread (the machine has two cores)."""
+    out = subprocess.run(
+        ["wrk", "-t1", f"-c{CONCURRENCY}", f"-d{seconds}s", "--latency", url],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    if "Non-2xx" in out or "Socket errors" in out:
+        raise RuntimeError(f"wrk saw errors:\n{out}")
+    rps = float(re.search(r"Requests/sec:\s+([\d.]+)", out).group(1))  # type: ignore[union-attr]
+    pct = {p: _ms(v) for p, v in re.findall(r"^\s+(50|99)%\s+(\S+)$", out, re.M)}
+    return rps, pct["50"], pct["99"]
+
+
+def _ms(text: str) -> float:
+    for unit, scale in (("us", 1e-3), ("ms", 1.0), ("s", 1e3)):
+        if text.endswith(unit):
+            return float(text[: -len(unit)]) * scale
+    raise ValueError(f"wrk latency {text!r}")
+
+
+HTTPX_GENERATOR = """
+import asyncio, sys, time, httpx, json
+url, n, conc = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+async def main():
+    lat = []
+    todo = iter(range(n))
+    limits = httpx.Limits(max_connections=conc, max_keepalive_connections=conc)
+    async with httpx.AsyncClient(limits=limits, timeout=30) as c:
+        async def worker():
+            for _ in todo:
+                t0 = time.perf_counter(); r = await c.get(url); lat.append(time.perf_counter() - t0)
+                r.raise_for_status()
+        t0 = time.perf_counter()
+        await asyncio.gather(*(worker() for _ in range(conc)))
+        print(json.dumps({"rps": n / (time.perf_counter() - t0), "lat": lat}))
+asyncio.run(main())
+"""
+
+
+def _httpx_subprocess(url: str, n: int) -> tuple[float, float, float]:
+    out = subprocess.run(
+        [sys.executable, "-c", HTTPX_GENERATOR, url, str(n), str(CONCURRENCY)],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    doc = json.loads(out)
+    lat = np.asarray(doc["lat"]) * 1e3
+    return float(doc["rps"]), float(np.percentile(lat, 50)), float(np.percentile(lat, 99))
+
+
+def status_load(url: str) -> None:
+    """GET /system/status under 16 connections from another process; prints the figure and the target."""
+    target = f"{url}/api/v1/system/status"
+    if shutil.which("wrk"):
+        _wrk(target, 2)  # warm-up
+        rps, p50, p99 = _wrk(target, STATUS_SECONDS)
+        tool = f"wrk -t1 -c{CONCURRENCY} -d{STATUS_SECONDS}s"
+    else:
+        rps, p50, p99 = _httpx_subprocess(target, 20_000)
+        tool = f"httpx generator in a subprocess, {CONCURRENCY} connections (install wrk for the real figure)"
+    ok = rps >= STATUS_TARGET_RPS and p99 <= STATUS_TARGET_P99_MS
+    print(
+        f"GET /api/v1/system/status ({tool}): {rps:6.0f} req/s, p50 {p50:.2f} ms, p99 {p99:.2f} ms "
+        f"— target ≥ {STATUS_TARGET_RPS} req/s, p99 ≤ {STATUS_TARGET_P99_MS:g} ms: {'met' if ok else 'MISSED'}"
+    )
+
+
 async def _run() -> None:
     import asyncpg
 
@@ -165,6 +257,7 @@ async def _run() -> None:
             try:
                 url = f"http://127.0.0.1:{port}"
                 await _wait_up(url, proc)
+                await asyncio.to_thread(status_load, url)
                 for path in (
                     "/api/v1/system/status",
                     "/api/v1/picks?limit=100&offset=0",

@@ -18,6 +18,7 @@ from pathlib import Path
 from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 from pickplace.v1 import common_pb2, robot_pb2, task_pb2
+from prometheus_client import CollectorRegistry
 from sqlalchemy.ext.asyncio import AsyncEngine, AsyncSession, async_sessionmaker
 
 from gateway import errors as rest_errors
@@ -35,10 +36,11 @@ from gateway.persist import PickBuffer, PickWriter, WrittenPick
 from gateway.records import pick_json
 from gateway.security import BodySizeLimit, SecurityHeaders
 from gateway.state import Cell
+from gateway.status import StatusFastPath
 from services.common.bus import Bus
 from services.common.errors import ConfigurationError, InvalidInputError, RobotError
 from services.common.keys import CellKeys
-from services.common.metrics import CellMetrics
+from services.common.metrics import CellMetrics, labelled_registry
 from services.common.settings import REPO_ROOT, Settings
 
 log = logging.getLogger("pickplace.gateway")
@@ -143,8 +145,10 @@ def create_app(
     bus: Bus | None = None,
     calibration_executor: CalibrationExecutor | None = None,
     serve_web: bool = True,
+    metrics_registries: Sequence[CollectorRegistry] = (),
 ) -> FastAPI:
-    """The gateway app. ``bus``: an open Zenoh bus to share (the embedded run); else it opens its own."""
+    """The gateway app. ``bus``: an open Zenoh bus to share (the embedded run); else it opens its own.
+    ``metrics_registries``: other services' registries in this process, exported at /metrics too."""
     gw = settings.gateway
     if gw.api_token is None:
         raise ConfigurationError(
@@ -173,7 +177,7 @@ def create_app(
             for p in picks:
                 ev = p.event
                 metrics.observe_pick(
-                    ev.robot_id or gw.robot_id,
+                    gw.robot_id,  # the configured robot, whatever the event names (the task names its cell)
                     ev.object_class,
                     ev.success,
                     ev.cycle_time_s,
@@ -204,6 +208,9 @@ def create_app(
                 settings, engine, sessions, display, hub, writer, clients, metrics, calibration, cache
             )
             app.state.cell = cell
+            cell.metrics_export = labelled_registry(
+                metrics.registry, cell_id=settings.cell_id, robot_id=gw.robot_id, extra=metrics_registries
+            )
             hub.on_change = lambda _kind: cell.status.invalidate()
             app.state.api_token = gw.api_token.get_secret_value() if gw.api_token else ""
 
@@ -306,6 +313,7 @@ def create_app(
     if serve_web:
         web.mount(app, repo_path(gw.web_dir), settings)
 
+    app.add_middleware(StatusFastPath, path=f"{API_PREFIX}/system/status")  # inside the security headers
     app.add_middleware(SecurityHeaders, api_prefix=API_PREFIX)
     if gw.cors_origins:
         app.add_middleware(

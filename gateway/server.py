@@ -135,14 +135,17 @@ def dashboard_url(server: GatewayServer, token: str | None = None) -> str:
 
 @contextlib.asynccontextmanager
 async def embedded_gateway(
-    settings: Settings, bus: Any, calibration_executor: Any = None
+    settings: Settings, bus: Any, calibration_executor: Any = None, metrics_registries: Any = ()
 ) -> AsyncIterator[tuple[GatewayServer, str]]:
     """The gateway inside ``pickplace up``: shares the cell's Zenoh bus, SQLite migrated on start,
-    a generated token. Yields the server and the dashboard URL to print (token in its fragment)."""
+    a generated token, and exports the other services' metrics registries (``metrics_registries``).
+    Yields the server and the dashboard URL to print (token in its fragment)."""
     from gateway.app import create_app
 
     gs, token = embedded_settings(settings)
-    app = create_app(gs, bus=bus, calibration_executor=calibration_executor)
+    app = create_app(
+        gs, bus=bus, calibration_executor=calibration_executor, metrics_registries=metrics_registries
+    )
     async with GatewayServer(app, gs.gateway.host, gs.gateway.port) as server:
         yield server, dashboard_url(server, token)
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from pickplace.v1 import common_pb2
+from prometheus_client import CollectorRegistry
 from sqlalchemy.ext.asyncio import AsyncEngine, AsyncSession, async_sessionmaker
 
 from gateway.cache import ReadCache
@@ -62,6 +63,7 @@ class Cell:
     edge_port: int | None = None
     bus: Bus | None = None
     config_patch: dict[str, Any] = field(default_factory=dict)  # every change PUT /config accepted
+    metrics_export: CollectorRegistry | None = None  # what /metrics renders (cell_id, robot_id on all)
     status: StatusBoard = field(init=False)
     _jobs: set[asyncio.Task[None]] = field(default_factory=set)
 

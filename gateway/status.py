@@ -14,6 +14,8 @@ import time
 from collections.abc import Awaitable, Callable
 from typing import Any, Literal, Protocol
 
+from starlette.types import ASGIApp, Receive, Scope, Send
+
 from gateway.live import LiveHub
 from gateway.persist import PickWriter
 from gateway.schemas import HealthSummary, RobotSummary, SystemStatus, TaskSummary
@@ -64,6 +66,7 @@ class StatusBoard:
         self.picks_today = 0
         self.succeeded_today = 0
         self.database_ok = True
+        self.counted = False  # today's picks read at least once
         self.builds = 0
         self._json: bytes | None = None
         self._model: SystemStatus | None = None
@@ -114,8 +117,31 @@ class StatusBoard:
         """Read today's picks (one query); the snapshot shows the database as unavailable on failure."""
         try:
             self.picks_today, self.succeeded_today = await today()
-            self.database_ok = True
+            self.database_ok = self.counted = True
         except Exception as exc:  # the status must not go dark with the database
             log.debug("status without database: %s", exc)
             self.database_ok = False
         self.invalidate()
+
+
+class StatusFastPath:
+    """Answers ``GET {path}`` with the snapshot's bytes before FastAPI routes the request (pure ASGI:
+    no routing, no dependency injection, no validation); everything else passes through. The
+    FastAPI route of the same path stays, for the OpenAPI document and the same answer."""
+
+    def __init__(self, app: ASGIApp, path: str):
+        self.app = app
+        self.path = path
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http" or scope["path"] != self.path or scope["method"] not in ("GET", "HEAD"):
+            await self.app(scope, receive, send)
+            return
+        board: StatusBoard | None = getattr(getattr(scope["app"].state, "cell", None), "status", None)
+        if board is None:  # the app has not started yet
+            await self.app(scope, receive, send)
+            return
+        body = board.json()
+        headers = [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]
+        await send({"type": "http.response.start", "status": 200, "headers": headers})
+        await send({"type": "http.response.body", "body": b"" if scope["method"] == "HEAD" else body})

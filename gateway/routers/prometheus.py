@@ -18,4 +18,4 @@ router = APIRouter(tags=["prometheus"])
 )
 async def prometheus_metrics(cell: CellDep) -> Response:
     cell.metrics.pick_buffer_depth.set(len(cell.writer.buffer))
-    return Response(render(cell.metrics.registry), media_type=CONTENT_TYPE_LATEST)
+    return Response(render(cell.metrics.registry, cell.metrics_export), media_type=CONTENT_TYPE_LATEST)

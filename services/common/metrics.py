@@ -13,11 +13,12 @@ Names follow Prometheus conventions: base units in the name (``_seconds``, ``_ra
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from typing import Final
 
-from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, generate_latest
+from prometheus_client import REGISTRY, CollectorRegistry, Counter, Gauge, Histogram, generate_latest
 from prometheus_client import multiprocess as prom_multiprocess
+from prometheus_client.metrics_core import Metric
 
 MULTIPROC_ENV = "PROMETHEUS_MULTIPROC_DIR"
 
@@ -147,6 +148,54 @@ def exposition_registry(own: CollectorRegistry) -> CollectorRegistry:
     return agg
 
 
-def render(own: CollectorRegistry) -> bytes:
-    """Prometheus text exposition of ``own`` (or of every process, in multi-process mode)."""
-    return generate_latest(exposition_registry(own))
+# Every series a cell exports carries these two, whichever service made it.
+CELL_LABEL: Final = "cell_id"
+ROBOT_LABEL: Final = "robot_id"
+
+
+class _Labelled:
+    """A collector giving every sample of ``sources`` the cell's labels: ``cell_id``, and ``robot_id``
+    set to the configured robot id (a pick event's own robot_id, the task's cell id, is overridden:
+    one robot, one value). A family is taken from the first source that has samples of it, so two
+    registries defining the same family (every service's CellMetrics) do not export it twice."""
+
+    def __init__(self, sources: Sequence[CollectorRegistry], labels: dict[str, str]):
+        self.sources = sources
+        self.labels = labels
+
+    def collect(self) -> Iterator[Metric]:
+        seen: set[str] = set()
+        for source in self.sources:
+            for family in source.collect():
+                if family.name in seen or not family.samples:
+                    continue
+                seen.add(family.name)
+                out = Metric(family.name, family.documentation, family.type, family.unit)
+                out.samples = [s._replace(labels={**s.labels, **self.labels}) for s in family.samples]
+                yield out
+
+
+def labelled_registry(
+    own: CollectorRegistry,
+    *,
+    cell_id: str,
+    robot_id: str,
+    extra: Sequence[CollectorRegistry] = (),
+    with_process_default: bool = True,
+) -> CollectorRegistry:
+    """What a cell's ``/metrics`` renders: ``own`` (every process's values in multi-process mode), then
+    ``extra`` registries of services in this process, then prometheus-client's default registry (the
+    module-level metrics of the motion and grasp services when they share the process), all with
+    ``cell_id`` and ``robot_id`` on every series."""
+    sources = [exposition_registry(own), *extra]
+    if with_process_default and multiprocess_dir() is None:
+        sources.append(REGISTRY)
+    out = CollectorRegistry(auto_describe=False)
+    out.register(_Labelled(sources, {CELL_LABEL: cell_id, ROBOT_LABEL: robot_id}))
+    return out
+
+
+def render(own: CollectorRegistry, registry: CollectorRegistry | None = None) -> bytes:
+    """Prometheus text exposition of ``registry`` if given (a :func:`labelled_registry`), else of
+    ``own`` (or of every process, in multi-process mode)."""
+    return generate_latest(registry if registry is not None else exposition_registry(own))

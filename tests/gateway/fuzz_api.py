@@ -193,7 +193,7 @@ async def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--max-examples", type=int, default=200)
-    p.add_argument("--max-time", type=float, default=None)
+    p.add_argument("--max-time", type=int, default=None)
     p.add_argument("--report-dir", default="artifacts/fuzz-api")
     a = p.parse_args(argv)
     report_dir = fresh_dir(a.report_dir)
@@ -207,7 +207,7 @@ async def main(argv: list[str] | None = None) -> int:
     print(f"requests: {r.report['requests']}, failures: {len(r.report['failures'])}")
     for f in r.report["failures"]:
         print("  ", f)
-    return r.returncode
+    return r.returncode or (0 if r.report["requests"] else 1)
 
 
 if __name__ == "__main__":

@@ -176,7 +176,7 @@ async def test_estop_reaches_the_simulated_dobot(robot_settings, sim_server, sql
             st = (await gw.client.get("/api/v1/system/status")).json()
             assert st["state"] == "ESTOP" and st["robot"]["estop_active"] and 116 in st["robot"]["alarms"]
             prom = (await gw.client.get("/metrics")).text
-            assert 'emergency_stop_total{robot_id="robot_01",source="rest"} 1.0' in prom
+            assert 'emergency_stop_total{cell_id="cell1",robot_id="robot_01",source="rest"} 1.0' in prom
 
             r = await gw.client.post("/api/v1/system/estop/release", headers=AUTH)
             assert r.status_code == 200, r.text
@@ -299,11 +299,12 @@ async def test_limits_cors_docs_and_prometheus(settings, sqlite_db, tmp_path):
         bus.publish(keys.pick_events, pick_event(1, success=False))
         await wait_until(lambda: gw.cell.writer.written == 2, 5.0, "two picks written")
         prom = (await c.get("/metrics")).text
-        assert r'pick_success_total{object_class="rod",robot_id="robot_01"} 1.0' in prom
-        assert r'pick_failure_total{object_class="cube_red",robot_id="robot_01",stage="GRASP"} 1.0' in prom
-        assert 'cycle_time_seconds_count{robot_id="robot_01"} 1.0' in prom
-        assert 'grasp_quality{robot_id="robot_01"}' in prom
-        assert "picks_persisted_total 2.0" in prom
+        cr = 'cell_id="cell1",'
+        assert f'pick_success_total{{{cr}object_class="rod",robot_id="robot_01"}} 1.0' in prom
+        assert f'pick_failure_total{{{cr}object_class="cube_red",robot_id="robot_01",stage="GRASP"}} 1.0' in prom
+        assert f'cycle_time_seconds_count{{{cr}robot_id="robot_01"}} 1.0' in prom
+        assert f'grasp_quality{{{cr}robot_id="robot_01"}}' in prom
+        assert f'picks_persisted_total{{{cr}robot_id="robot_01"}} 2.0' in prom
 
 
 async def test_calibration_run_progress_and_record(settings, sqlite_db, tmp_path):

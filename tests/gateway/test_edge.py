@@ -94,4 +94,4 @@ async def test_edge_needs_the_token_and_relays_to_the_driver(robot_settings, sim
                 r = await stub.EmergencyStop(robot_pb2.EmergencyStopRequest(), metadata=META)
                 assert r.success and sim_server.controller.estop
             prom = (await gw.client.get("/metrics")).text
-            assert 'emergency_stop_total{robot_id="robot_01",source="grpc"} 1.0' in prom
+            assert 'emergency_stop_total{cell_id="cell1",robot_id="robot_01",source="grpc"} 1.0' in prom
