@@ -301,7 +301,9 @@ async def test_limits_cors_docs_and_prometheus(settings, sqlite_db, tmp_path):
         prom = (await c.get("/metrics")).text
         cr = 'cell_id="cell1",'
         assert f'pick_success_total{{{cr}object_class="rod",robot_id="robot_01"}} 1.0' in prom
-        assert f'pick_failure_total{{{cr}object_class="cube_red",robot_id="robot_01",stage="GRASP"}} 1.0' in prom
+        assert (
+            f'pick_failure_total{{{cr}object_class="cube_red",robot_id="robot_01",stage="GRASP"}} 1.0' in prom
+        )
         assert f'cycle_time_seconds_count{{{cr}robot_id="robot_01"}} 1.0' in prom
         assert f'grasp_quality{{{cr}robot_id="robot_01"}}' in prom
         assert f'picks_persisted_total{{{cr}robot_id="robot_01"}} 2.0' in prom
