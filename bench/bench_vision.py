@@ -14,6 +14,7 @@ import time
 import numpy as np
 
 from services.common.settings import VisionSettings
+from services.vision.confidence import brier_score, expected_calibration_error
 from services.vision.pipeline import VisionPipeline
 from services.vision.synthetic import NoiseModel, d435_intrinsics, render_scene
 from services.vision.synthetic_scenes import HardCase, hard_case, random_scene
@@ -151,6 +152,8 @@ def hard_set_figures(width: int, height: int, n: int = N_HARD, seed0: int = HARD
     latency of the rod pipeline (ms, median over three runs of each frame)."""
     pipe = VisionPipeline(VisionSettings(detect_cubes=False))
     found, centre, axis, ghosts, n_rod, n_free, ms, misses = 0, [], [], 0, 0, 0, [], []
+    confidence: list[float] = []  # of the best rod, beside whether its pose was accurate (2 mm, 1°)
+    accurate: list[bool] = []
     for k in range(n):
         case = hard_case(seed0 + k, width, height)
         frame = case.render().frame
@@ -165,6 +168,9 @@ def hard_set_figures(width: int, height: int, n: int = N_HARD, seed0: int = HARD
         if case.has_rod:
             n_rod += 1
             err = _rod_error(res, case)
+            if res.rods:
+                confidence.append(res.rods[0].confidence)
+                accurate.append(err is not None and err[0] <= 2.0 and err[1] <= 1.0)
             if err is None:
                 misses.append(case.seed)
             else:
@@ -186,6 +192,9 @@ def hard_set_figures(width: int, height: int, n: int = N_HARD, seed0: int = HARD
         "latency_median_ms": float(np.median(ms)),
         "latency_p95_ms": float(np.percentile(ms, 95)),
         "misses": misses[:12],
+        "confidence_ece": expected_calibration_error(confidence, accurate) if confidence else float("nan"),
+        "confidence_brier": brier_score(confidence, accurate) if confidence else float("nan"),
+        "accurate": float(np.mean(accurate)) if accurate else float("nan"),
     }
 
 
@@ -264,6 +273,10 @@ def print_hard_set(n: int = N_HARD) -> None:
             f"ghost rods {f['ghosts']} ({f['n_free']} rod-free scenes; target 0), "
             f"rod latency median {f['latency_median_ms']:.1f} ms / p95 {f['latency_p95_ms']:.1f} ms "
             f"(≤ {lat_target:.0f}); missed seeds {f['misses']}"
+        )
+        print(
+            f"  {width}x{height}: rod confidence vs accurate pose (2 mm, 1°; {f['accurate']:.1%} accurate): "
+            f"calibration error {f['confidence_ece']:.3f}, Brier {f['confidence_brier']:.3f}"
         )
         g = hard_set_scene_figures(width, height, n)
         print(

@@ -32,7 +32,7 @@ def pose(p: Array, R: Array) -> common_pb2.Pose:
     )
 
 
-VISIBILITY_MSG: dict[Visibility, vision_pb2.Visibility.ValueType] = {
+VISIBILITY_MSG: dict[Visibility, vision_pb2.Visibility] = {
     Visibility.WHOLE: vision_pb2.VISIBILITY_WHOLE,
     Visibility.CUT_BY_EDGE: vision_pb2.VISIBILITY_CUT_BY_EDGE,
     Visibility.OCCLUDED: vision_pb2.VISIBILITY_OCCLUDED,

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from services.common.settings import VisionSettings
+from services.vision.confidence import brier_score, expected_calibration_error
 from services.vision.pipeline import VisionPipeline
 from services.vision.synthetic import (
     COLORS_RGB,
@@ -83,6 +84,7 @@ def test_rod_is_found_on_the_hard_slice_and_no_ghost_appears(width, height, seed
     """Highlights, black neighbours, dropout: the rod is found, within 2 mm and 1°, and nothing else is a rod."""
     pipe = VisionPipeline(VisionSettings(detect_cubes=False))
     n_rod = 0
+    confidence = []
     for seed in seeds:
         case = hard_case(seed, width, height)
         result = pipe.detect(case.render().frame, case.scene.T_base_camera)
@@ -93,7 +95,10 @@ def test_rod_is_found_on_the_hard_slice_and_no_ghost_appears(width, height, seed
         assert len(result.rods) == 1, f"seed {seed}: {len(result.rods)} rods, notes {result.notes}"
         centre, axis = _rod_error(result, case)
         assert centre <= 0.002 and axis <= 1.0, f"seed {seed}: {centre * 1e3:.2f} mm, {axis:.2f}°"
+        confidence.append(result.rods[0].confidence)
     assert n_rod >= len(seeds) - 2
+    # every pose here is accurate: a confidence that means P(accurate) says so (the bench scores the whole set)
+    assert expected_calibration_error(confidence, [True] * len(confidence)) < 0.1
 
 
 def test_saturated_stripe_does_not_cut_the_rod_in_two():
@@ -149,3 +154,11 @@ def test_rod_cut_across_by_a_band_is_merged_from_its_collinear_pieces():
     det = result.rods[0]
     assert np.linalg.norm(det.center_base - np.asarray(rod.center)) < 0.003
     assert det.length_m == pytest.approx(0.2, abs=0.01)
+
+
+def test_calibration_error_and_brier_score_measure_what_they_say():
+    right = [True] * 9 + [False]
+    assert expected_calibration_error([0.9] * 10, right) == pytest.approx(0.0)
+    assert expected_calibration_error([0.5] * 10, right) == pytest.approx(0.4)
+    assert brier_score([1.0] * 10, right) == pytest.approx(0.1)
+    assert brier_score([0.9] * 10, right) == pytest.approx(0.09)
