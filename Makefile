@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 WEB_DEPS := web/node_modules/.package-lock.json
 
-.PHONY: install run test test-fast lint proto bench clean browser up up-local compose-smoke fuzz-api
+.PHONY: install run test test-fast lint proto bench clean browser up up-local compose-smoke eval-long fuzz-api
 
 install: $(STAMP) $(WEB_DEPS) browser
 
@@ -42,6 +42,21 @@ proto: install
 
 bench: install
 	MUJOCO_GL=egl $(PY) -m bench
+
+# 1,000 randomized pick-and-stand trials and 300 sort-cubes in the twin, each in its own world
+# (sim.twin.randomization), with a progress bar, a report with the 95 % interval and the sensitivity
+# table, JSON under var/eval/ and the wall time (hours on 2 cores; not part of `make test` or CI).
+# EVAL_SPEED asks the twin for that many x real time; it slows its clock when the machine cannot keep
+# it (the report says the speed achieved), so outcomes and controller-clock times do not depend on it.
+EVAL_SPEED ?= 4
+eval-long: install
+	@mkdir -p var/eval
+	@start=$$(date +%s); \
+	MUJOCO_GL=egl $(VENV)/bin/pickplace eval --profile sim --trials 1000 --seed 1000 --speed $(EVAL_SPEED) \
+	  --json var/eval/stand-rod.json && \
+	MUJOCO_GL=egl $(VENV)/bin/pickplace eval --profile sim --task sort-cubes --trials 300 --seed 1000 \
+	  --speed $(EVAL_SPEED) --json var/eval/sort-cubes.json; \
+	rc=$$?; echo "eval-long wall time: $$(( $$(date +%s) - start )) s (reports in var/eval/)"; exit $$rc
 
 # The gateway's API contract under schemathesis (all checks, all phases, stateful links) for 10 min
 # against a live gateway on loopback with a scripted task service and robot driver; the tests run a

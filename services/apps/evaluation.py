@@ -15,6 +15,13 @@ robot's limits, at rest at each, plus the gripper's actuation time per action.
 ``load`` runs that many busy processes beside the cell (always ended with the run).
 A trial whose harness fails (a scene that cannot be laid out, an exception) is
 recorded as a harness error with its reason, and the run goes on.
+
+Worlds: by default every trial's twin is its own randomized world (``sim.twin.randomization``: rod size
+and mass, frictions, table height, grip force, the drive's tracking and latency, camera mount,
+intrinsics, depth noise, light), seeded from the trial's seed and recorded in the trial's JSON; the cell
+is told none of it. ``randomize=False`` (``--nominal``) runs every trial in the configured world. The
+report (``eval_report``) gives the success rate with its 95 % Wilson interval and the success per bin of
+each randomized parameter.
 """
 
 from __future__ import annotations
@@ -29,14 +36,15 @@ import time
 from collections import Counter
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 from typing import TypedDict
 
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-from rich.table import Table
 
 from services.apps.cell import Cell
+from services.apps.eval_report import BinStat, _p95, sensitivity, wilson_interval
+from services.apps.eval_report import print_report as print_report
+from services.apps.eval_report import write_report as write_report
 from services.common.modes import TaskKind
 from services.common.settings import Settings
 from services.kinematics.robot_models import get_robot
@@ -78,6 +86,7 @@ class TrialResult:
     executed_waypoints: list[list[float]] = field(default_factory=list)  # rad
     harness_error: str = ""
     scene_redraws: int = 0  # layouts the scene sampler drew again before every object fitted
+    randomization: dict[str, float] = field(default_factory=dict)  # this trial's world (empty: nominal)
 
     @property
     def bound_ratio(self) -> float | None:
@@ -90,6 +99,8 @@ class EvalSummary(TypedDict):
     seed: int
     load: int
     success_rate: float
+    success_ci95: tuple[float, float]  # Wilson score interval
+    randomized: bool
     harness_errors: int
     cycle_time_median_s: float | None
     cycle_time_p95_s: float | None
@@ -104,6 +115,8 @@ class EvalSummary(TypedDict):
     sim_speed_achieved: float | None
     sim_late_ticks: int
     wall_time_s: float
+    randomization_ranges: dict[str, tuple[float, float]]
+    sensitivity: dict[str, list[BinStat]]
 
 
 @dataclass
@@ -117,6 +130,8 @@ class EvalReport:
     wall_time_s: float = 0.0
     sim_speed_achieved: float | None = None  # sim time per wall time over the whole run
     sim_late_ticks: int = 0
+    randomized: bool = False
+    ranges: dict[str, tuple[float, float]] = field(default_factory=dict)  # of each randomization record
 
     @property
     def success_rate(self) -> float:
@@ -139,6 +154,8 @@ class EvalReport:
             "seed": self.seed,
             "load": self.load,
             "success_rate": self.success_rate,
+            "success_ci95": wilson_interval(self.successes, len(self.results)),
+            "randomized": self.randomized,
             "harness_errors": len(self.results) - len(ran),
             "cycle_time_median_s": statistics.median(cycles) if cycles else None,
             "cycle_time_p95_s": _p95(cycles),
@@ -154,6 +171,12 @@ class EvalReport:
             "sim_speed_achieved": self.sim_speed_achieved,
             "sim_late_ticks": self.sim_late_ticks,
             "wall_time_s": self.wall_time_s,
+            "randomization_ranges": self.ranges if self.randomized else {},
+            "sensitivity": (
+                sensitivity([(r.randomization, r.success) for r in ran if r.randomization], self.ranges)
+                if self.randomized
+                else {}
+            ),
         }
 
     def stage_medians(self) -> dict[str, float]:
@@ -166,13 +189,6 @@ class EvalReport:
     def to_json(self) -> str:
         trials = [{**asdict(r), "bound_ratio": r.bound_ratio} for r in self.results]
         return json.dumps({"summary": self.summary(), "trials": trials}, indent=2)
-
-
-def _p95(xs: list[float]) -> float | None:
-    if not xs:
-        return None
-    s = sorted(xs)
-    return s[min(len(s) - 1, round(0.95 * (len(s) - 1)))]
 
 
 def execution_bound(
@@ -218,10 +234,21 @@ async def run_eval(
     console: Console | None = None,
     progress: bool = True,
     load: int = 0,
+    randomize: bool = True,
 ) -> EvalReport:
-    report = EvalReport(task=task, trials=trials, seed=seed, load=load)
+    from services.sim.twin.randomization import record_ranges
+
     s = settings.model_copy(
         update={"task": settings.task.model_copy(update={"reset_scene_each_cycle": False, "task": task})}
+    )
+    s = _with_randomization(s, randomize)
+    report = EvalReport(
+        task=task,
+        trials=trials,
+        seed=seed,
+        load=load,
+        randomized=randomize,
+        ranges=record_ranges(s.sim.twin) if randomize else {},
     )
     spec = get_robot(s.robot.model)
     trial = _TrialRunner(s, task, JointLimits.from_spec(spec), list(spec.joint_names))
@@ -284,6 +311,7 @@ class _TrialRunner:
                 except Exception as exc:  # the trial's boundary: one broken trial never ends the run
                     log.warning("trial %d (seed %d): harness error: %s", i, seed + i, exc, exc_info=True)
                     res = _harness_error(seed + i, exc)
+                    res.randomization = _world_record(cell, seed + i)
                 report.results.append(res)
                 report.successes += int(res.success)
                 bar.update(job, advance=1, rate=f"{report.successes}/{i + 1} ok")
@@ -338,7 +366,26 @@ class _TrialRunner:
             bound_gripper_s=bound_gripper,
             executed_waypoints=outcome.executed_waypoints,
             scene_redraws=cell.engine.scene.layout_redraws,
+            randomization=_world_record(cell, seed),
         )
+
+
+def _with_randomization(settings: Settings, enabled: bool) -> Settings:
+    twin = settings.sim.twin
+    rnd = twin.randomization.model_copy(update={"enabled": enabled})
+    sim = settings.sim.model_copy(update={"twin": twin.model_copy(update={"randomization": rnd})})
+    return settings.model_copy(update={"sim": sim})
+
+
+def _world_record(cell: Cell, seed: int) -> dict[str, float]:
+    """The randomization record of the world the trial of ``seed`` ran in ({} when nominal or unknown)."""
+    try:
+        world = cell.engine.world
+    except (AssertionError, AttributeError):  # no twin engine (yet): nothing to record
+        return {}
+    if not world.variation.randomized or world.scene.seed != seed:
+        return {}
+    return world.variation.record()
 
 
 def _harness_error(seed: int, exc: BaseException) -> TrialResult:
@@ -380,54 +427,3 @@ async def _settle_until_rest(cell: Cell, name: str | None) -> float:
         await cell.settle(SETTLE_STEP_S)
         waited += SETTLE_STEP_S
     return waited
-
-
-def print_report(report: EvalReport, console: Console) -> None:
-    s = report.summary()
-    t = Table(title=f"pickplace eval — {report.task}, {s['trials']} trials from seed {report.seed}")
-    t.add_column("metric")
-    t.add_column("value", justify="right")
-    t.add_row(
-        "success rate (ground truth)", f"{100 * report.success_rate:.1f} % ({report.successes}/{s['trials']})"
-    )
-    for label, v in (
-        ("cycle time median (controller clock)", s["cycle_time_median_s"]),
-        ("cycle time p95 (controller clock)", s["cycle_time_p95_s"]),
-        ("cycle time median on a 1× cell (this machine's compute)", s["cycle_time_1x_median_s"]),
-        ("compute (detect + plan) median, wall time", s["compute_wall_median_s"]),
-        ("bound (ruckig, executed waypoints + gripper) median", s["bound_median_s"]),
-    ):
-        t.add_row(label, "-" if v is None else f"{v:.2f} s")
-    share = s["compute_share_of_cycle"]
-    t.add_row("compute share of a 1× cycle", "-" if share is None else f"{100 * share:.1f} %")
-    ratio, ratio95 = s["bound_ratio_median"], s["bound_ratio_p95"]
-    if ratio is not None and ratio95 is not None:
-        t.add_row("measured / bound (median / p95)", f"{ratio:.2f} / {ratio95:.2f}")
-    tilts = [r.tilt_before_release_deg for r in report.results if r.tilt_before_release_deg is not None]
-    if tilts:
-        t.add_row(
-            "tilt before release (median / max)", f"{statistics.median(tilts):.2f}° / {max(tilts):.2f}°"
-        )
-    slow = sum(r.settle_s > SETTLE_S for r in report.results)
-    if slow:
-        t.add_row(f"judged after more than {SETTLE_S:.0f} s settling", str(slow))
-    stages = s["stage_median_s"]
-    if stages:
-        t.add_row("median per state (controller clock)", " ".join(f"{k} {v:.2f}" for k, v in stages.items()))
-    if s["load"]:
-        t.add_row("load (busy processes beside the cell)", str(s["load"]))
-    if s["sim_speed_achieved"] is not None:
-        t.add_row(
-            "sim speed achieved (late ticks)", f"{s['sim_speed_achieved']:.2f}× ({s['sim_late_ticks']})"
-        )
-    if s["harness_errors"]:
-        t.add_row("harness errors", str(s["harness_errors"]))
-    t.add_row("wall time", f"{report.wall_time_s:.0f} s")
-    for reason, n in s["failures"].items():
-        t.add_row(f"failed at {reason}", str(n))
-    console.print(t)
-
-
-def write_report(report: EvalReport, path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(report.to_json())

@@ -67,8 +67,10 @@ async def test_a_trial_that_breaks_is_a_harness_error_and_the_run_goes_on(tmp_pa
         return await real_judge(self, cell, seed, outcome)
 
     monkeypatch.setattr(evaluation._TrialRunner, "judge", judge_breaks_first)
-    report = await run_eval(s, trials=2, seed=10, progress=False)
+    report = await run_eval(s, trials=2, seed=10, progress=False, randomize=False)  # --nominal
     first, second = report.results
+    assert not report.randomized and first.randomization == {} and second.randomization == {}
+    assert report.summary()["sensitivity"] == {}
     assert first.stage_reached == HARNESS_STAGE and "cannot place cube_black" in first.harness_error
     assert not first.success and first.error_code == "HarnessError"
     assert second.seed == 11 and not second.harness_error and second.cycle_time_s > 0

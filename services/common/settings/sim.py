@@ -113,6 +113,77 @@ class TwinSceneSettings(Model):
         return self
 
 
+Range = tuple[float, float]
+
+
+class TwinRandomizationSettings(Model):
+    """Per-trial variation of the twin (``pickplace eval``; off for ``pickplace up``): each trial's world
+    draws every value uniformly from its range, seeded from the trial's seed. What the cell is told stays
+    nominal (vision's rod model, the calibration file, the camera's reported intrinsics), so every draw is
+    an error the cell must measure or tolerate. Deltas are added to, scales multiply, the nominal value in
+    ``physics`` / ``scene`` / ``camera``; absolute ranges replace it."""
+
+    enabled: bool = False
+    # Outer diameter: EN 10210-2 (hot-finished circular hollow sections), D ± 1 % with a minimum of
+    # ± 0.5 mm, so 22 mm ± 0.5 mm (Tata Steel Blue Book, "Rolling tolerances to EN 10210-2").
+    rod_diameter_delta_m: Range = (-0.0005, 0.0005)
+    # Length: EN 10305-1 exact lengths L <= 0.5 m are 0 / +2 mm (Zelpo Steel Tube Handbook 2018, p. 62).
+    rod_length_delta_m: Range = (0.0, 0.002)
+    rod_mass_scale: Range = (0.8, 1.2)  # issue 19: +-20 % (wall thickness -10 % per EN 10210-2, fillings)
+    # Finger pad on the rod: rubber / polyurethane pads on painted steel, static, dry; engineering-handbook
+    # range for rubber on metal (no datasheet for our pads; Cutkosky & Wright 1986 on compliant pads).
+    pad_friction: Range = (0.6, 1.2)
+    # Rod on the table: steel on plastic 0.20-0.45, wood on steel 0.45-0.75 (static, dry; Lust CDA3000
+    # engineering guide, table 7.21): painted steel on a laminate or wooden top.
+    rod_table_friction: Range = (0.2, 0.75)
+    table_height_delta_m: Range = (-0.005, 0.005)  # issue 19: table top vs. the robot base, +-5 mm
+    grip_force_scale: Range = (0.8, 1.2)  # issue 19: +-20 % (supply pressure / current limit)
+    # The drive's tracking: PD bandwidth +-25 % and a command latency of 0-2 servo ticks (8 ms, the
+    # Dobot's 125 Hz loop). Assumption: no vendor figure for the Nova5's servo tuning.
+    tracking_bandwidth_scale: Range = (0.75, 1.25)
+    command_latency_s: Range = (0.0, 0.016)
+    # Camera mount vs. the calibration the cell uses: +-2 mm per axis, +-0.5 deg about each axis (issue 19).
+    camera_offset_m: Range = (-0.002, 0.002)
+    camera_rotation_deg: Range = (-0.5, 0.5)
+    # Intrinsics, true vs. reported (the factory calibration's residual): focal +-0.5 %, principal point
+    # +-2 px. Assumption; for scale: a 1 deg FOV error is > 11 mm at 1 m (calvert.ch, "Improving the depth
+    # map accuracy of RealSense cameras"), Intel's self-calibration white paper restores drifted units.
+    focal_scale: Range = (0.995, 1.005)
+    principal_offset_px: Range = (-2.0, 2.0)
+    # Depth noise: subpixel RMS 0.05-0.15 px (Intel, "Tuning depth cameras for best performance": ~0.08
+    # on good texture, worse on poor texture); depth holes on the black rod, share of its pixels.
+    depth_subpixel: Range = (0.05, 0.15)
+    hole_fraction: Range = (0.2, 0.5)
+    # Light: key light and headlight intensity x scale; highlight strength on the specular rod (the
+    # camera's highlight gain, 4 by default). Assumption: cell lighting from dim to bright.
+    light_scale: Range = (0.6, 1.4)
+    highlight_gain: Range = (2.0, 6.0)
+
+    @model_validator(mode="after")
+    def _ordered(self) -> TwinRandomizationSettings:
+        for name in type(self).model_fields:
+            v = getattr(self, name)
+            if isinstance(v, tuple) and v[0] > v[1]:
+                raise ValueError(f"randomization range {name} = {list(v)}: the low end is above the high end")
+        for name in ("rod_mass_scale", "grip_force_scale", "tracking_bandwidth_scale", "focal_scale"):
+            if getattr(self, name)[0] <= 0:
+                raise ValueError(
+                    f"randomization range {name} must stay above 0, got {list(getattr(self, name))}"
+                )
+        if self.command_latency_s[0] < 0 or self.command_latency_s[1] > 0.1:
+            raise ValueError(
+                f"command_latency_s must lie within 0..0.1 s, got {list(self.command_latency_s)}"
+            )
+        for name in ("pad_friction", "rod_table_friction", "depth_subpixel", "light_scale", "highlight_gain"):
+            if getattr(self, name)[0] <= 0:
+                raise ValueError(
+                    f"randomization range {name} must stay above 0, got {list(getattr(self, name))}"
+                )
+        if not 0 <= self.hole_fraction[0] <= self.hole_fraction[1] <= 1:
+            raise ValueError(f"hole_fraction must lie within 0..1, got {list(self.hole_fraction)}")
+        return self
+
+
 class TwinSettings(Model):
     """The MuJoCo physics twin of the cell (``services.sim.twin``)."""
 
@@ -122,6 +193,7 @@ class TwinSettings(Model):
     scene: TwinSceneSettings = TwinSceneSettings()
     # A ChArUco board (vision.calibration.board) on the gripper, for calibration runs in the twin.
     calibration_board: bool = False
+    randomization: TwinRandomizationSettings = TwinRandomizationSettings()
 
 
 class SimSettings(Model):
@@ -137,6 +209,10 @@ class SimSettings(Model):
     # Joint speed and acceleration of the simulated controller at 100 % (deg/s, deg/s^2).
     max_joint_speed_deg_s: float = Field(180.0, gt=0)
     max_joint_acc_deg_s2: float = Field(720.0, gt=0)
+    # ServoJ feed watchdog: a stream whose newest ServoJ is older than its t plus this margin is halted
+    # (as a real controller ends a ServoJ whose t has run out). Host latency is wall time, so the
+    # controller sees it ``speed`` times longer: the margin is scaled by the speed; null = off.
+    servo_watchdog_margin_s: float | None = Field(0.5, gt=0, le=10)
     twin: TwinSettings = TwinSettings()
 
     @field_validator("host")

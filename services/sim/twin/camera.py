@@ -6,8 +6,11 @@ blocked by rendering. Depth comes from MuJoCo's depth pass (metric z along the o
 RealSense z16); the colour pass's depth would be biased. The segmentation pass tells the noise
 model which pixels lie on hole-prone (black, shiny) objects and gives evaluation code its masks.
 
-Intrinsics are exact for the render: square pixels, fy = (H/2)/tan(fovy/2), principal point at the
-image centre in pixel-index coordinates ((W−1)/2, (H−1)/2).
+Reported intrinsics are the nominal ones: square pixels, fy = (H/2)/tan(fovy/2), principal point at
+the image centre in pixel-index coordinates ((W−1)/2, (H−1)/2) — exact for an unvaried world. A
+randomized world (``world.variation``) renders with its true focal length and principal point
+(:func:`true_intrinsics`) and its own depth-noise level, hole share and highlight strength, while the
+frames still report the nominal intrinsics, like a camera whose factory calibration is a little off.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ import os
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 import concurrent.futures
+import dataclasses
 import threading
 from dataclasses import dataclass
 
@@ -29,7 +33,14 @@ from services.common.sensors import CameraIntrinsics, RGBDFrame
 from services.common.settings import TwinCameraSettings
 from services.sim.twin import mjcf
 from services.sim.twin.engine import TwinEngine, TwinSnapshot
-from services.sim.twin.noise import DepthNoiseModel, apply_depth_noise, apply_rgb_noise, to_z16
+from services.sim.twin.noise import (
+    HIGHLIGHT_GAIN,
+    DepthNoiseModel,
+    apply_depth_noise,
+    apply_rgb_noise,
+    to_z16,
+)
+from services.sim.twin.randomization import Variation
 
 Array = np.ndarray
 
@@ -46,10 +57,6 @@ class CleanViews:
     time_s: float
 
 
-# MuJoCo's Phong highlight on the black rod peaks at ~50 above its diffuse level under the twin's
-# lights; a colour sensor looking at polished black metal under cell lights records a stripe of
-# 100-255 (issue 15). So the noise model amplifies what lies above the rod's diffuse level.
-HIGHLIGHT_GAIN = 4.0
 HIGHLIGHT_BASE = 20  # about the black rod's diffuse brightness (0-255)
 
 
@@ -80,6 +87,22 @@ def twin_intrinsics(cam: TwinCameraSettings) -> CameraIntrinsics:
     ).validate()
 
 
+def true_intrinsics(cam: TwinCameraSettings, variation: Variation) -> CameraIntrinsics:
+    """The intrinsics a varied world renders with (the frames report :func:`twin_intrinsics`)."""
+    nominal = twin_intrinsics(cam)
+    if not variation.randomized:
+        return nominal
+    du, dv = variation.principal_offset_px
+    return CameraIntrinsics(
+        width=cam.width,
+        height=cam.height,
+        fx=nominal.fx * variation.focal_scale,
+        fy=nominal.fy * variation.focal_scale,
+        cx=nominal.cx + du,
+        cy=nominal.cy + dv,
+    ).validate()
+
+
 class TwinCamera:
     """Renders the twin as a D435i would see it. ``noise=None`` follows the settings."""
 
@@ -95,6 +118,13 @@ class TwinCamera:
         self._cfg = settings or engine.world.twin.camera
         self._noise_on = self._cfg.noise if noise is None else noise
         self._noise = DepthNoiseModel.from_settings(self._cfg)
+        self._highlight_gain = HIGHLIGHT_GAIN
+        v = engine.world.variation
+        if v.randomized and settings is None:  # this world's sensor and light
+            self._noise = dataclasses.replace(
+                self._noise, subpixel=v.depth_subpixel, hole_fraction=v.hole_fraction
+            )
+            self._highlight_gain = v.highlight_gain
         self._rng = np.random.default_rng(seed)
         self._intrinsics = twin_intrinsics(self._cfg)
         self._data = mujoco.MjData(self._model)
@@ -140,7 +170,9 @@ class TwinCamera:
                 hole_mask = self._hole_geom[views.geom_id]
                 depth_m = apply_depth_noise(views.depth_m, hole_mask, self._noise, self._rng)
                 color = apply_rgb_noise(
-                    boost_highlights(views.color, hole_mask), self._noise.rgb_sigma, self._rng
+                    boost_highlights(views.color, hole_mask, self._highlight_gain),
+                    self._noise.rgb_sigma,
+                    self._rng,
                 )
             else:
                 depth_m, color = views.depth_m, views.color

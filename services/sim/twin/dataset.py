@@ -64,7 +64,7 @@ def label_image(engine: TwinEngine, geom_id: Array) -> Array:
 
 def scene_truth(engine: TwinEngine, settings: Settings) -> dict[str, Any]:
     """Ground truth of the engine's current state as a JSON-ready dict."""
-    T_base_camera = gt.T_base_camera(engine.world.twin.camera)
+    T_base_camera = gt.true_T_base_camera(engine)
     T_camera_base = invert_transform(T_base_camera)
     objects = []
     for k, obj in enumerate(engine.scene.objects):

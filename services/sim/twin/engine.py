@@ -3,7 +3,8 @@
 The controller calls :meth:`TwinEngine.step` every control tick (8 ms of sim time) with the joint
 reference it produced; the engine sub-steps physics at the model timestep, tracking the reference
 with PD + velocity feed-forward (one implicit-damped actuator per joint), inertia feed-forward
-(M·qdd_ref) and gravity compensation (``gravcomp`` on the arm bodies), and reports what a real
+(M·qdd_ref) and gravity compensation (``gravcomp`` on the arm bodies) — the reference reaching the
+drive ``world.variation.command_latency_s`` late (whole physics steps; 0 nominally) — and reports what a real
 controller measures: joints, joint torques, the wrist force/torque, digital inputs, and a
 collision description (alarm 117) when an arm or gripper geom presses on the table, the obstacle
 or an object harder than ``collision_force_n``. The gripper follows the digital outputs.
@@ -15,6 +16,7 @@ MjData.
 
 from __future__ import annotations
 
+import collections
 import numbers
 import threading
 from dataclasses import dataclass
@@ -69,6 +71,10 @@ class TwinEngine:
         self._Mqdd = np.zeros(self.model.nv)
         self._qdd_full = np.zeros(self.model.nv)
         self._force6 = np.zeros(6)
+        # Command latency: the drive acts on the (actuator target, feed-forward torque) of this many
+        # physics steps ago; the line is refilled with the held pose on reset and hold.
+        self._latency_steps = round(world.variation.command_latency_s / self._h)
+        self._delay: collections.deque[tuple[Array, Array]] = collections.deque()
         self.data.ctrl[world.grip_act] = world.stroke_m  # open
         self.data.qpos[world.finger_qpos] = world.stroke_m / 2
         self.reset(np.zeros(world.spec.dof) if q0 is None else q0)
@@ -86,6 +92,7 @@ class TwinEngine:
             d.qfrc_applied[:] = 0.0
             self._hold_q = self._hold_ref = self._last_ref = None
             self._debt_s = 0.0
+            self._fill_delay(qv)
             mujoco.mj_forward(self.model, d)
             self._state = self._measure()
 
@@ -132,6 +139,7 @@ class TwinEngine:
             self._hold_ref = None if self._last_ref is None else self._last_ref.copy()
             self.data.ctrl[self.world.arm_act] = self._hold_q
             self.data.qfrc_applied[:] = 0.0
+            self._fill_delay(self._hold_q)  # a stop acts at once, whatever was in flight
 
     def close(self) -> None:
         self._closed = True
@@ -180,6 +188,12 @@ class TwinEngine:
         if self._closed:
             raise ExecutionError("the twin engine is closed")
 
+    def _fill_delay(self, q: Array) -> None:
+        zeros = np.zeros(self.model.nv)
+        self._delay.clear()
+        for _ in range(self._latency_steps):
+            self._delay.append((np.array(q, dtype=float), zeros))
+
     def _advance(self, dt: float, q: Array, qd: Array, qdd: Array) -> None:
         w, m, d = self.world, self.model, self.data
         total = self._debt_s + dt
@@ -195,9 +209,15 @@ class TwinEngine:
         d.qfrc_applied[w.arm_dof] = self._Mqdd[w.arm_dof]
         ff = self._ff_ratio * qd
         t_end = n_sub * self._h
+        frc_now = d.qfrc_applied.copy() if self._latency_steps else d.qfrc_applied
         for k in range(n_sub):
             # The reference is for the end of the tick; earlier sub-steps follow it back along qd.
-            d.ctrl[w.arm_act] = q - qd * (t_end - (k + 1) * self._h) + ff
+            target = q - qd * (t_end - (k + 1) * self._h) + ff
+            if self._latency_steps:
+                self._delay.append((target, frc_now))
+                target, frc = self._delay.popleft()
+                d.qfrc_applied[:] = frc
+            d.ctrl[w.arm_act] = target
             mujoco.mj_step(m, d)
 
     def _measure(self) -> EngineState:

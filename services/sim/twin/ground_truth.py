@@ -16,7 +16,7 @@ from services.common.errors import InvalidInputError
 from services.common.frames import invert_transform, make_transform
 from services.common.settings import TwinCameraSettings
 from services.sim.twin.engine import TwinEngine
-from services.sim.twin.mjcf import camera_axes
+from services.sim.twin.mjcf import camera_axes, camera_pose
 
 Array = np.ndarray
 
@@ -65,9 +65,16 @@ class GraspMetrics:
 
 
 def T_base_camera(camera: TwinCameraSettings) -> Array:
-    """True pose of the optical frame (x right, y down, z forward) in the base frame."""
+    """Nominal pose of the optical frame (x right, y down, z forward) in the base frame: the true one of
+    an unvaried world (:func:`true_T_base_camera` for a randomized one)."""
     right, up, fwd = camera_axes(camera)
     return make_transform(np.column_stack([right, -up, fwd]), camera.position_m)
+
+
+def true_T_base_camera(engine: TwinEngine) -> Array:
+    """Where this world's camera really is (its mount error included)."""
+    w = engine.world
+    return camera_pose(w.twin.camera, w.variation if w.variation.randomized else None)
 
 
 def _check_name(engine: TwinEngine, name: str) -> int:
@@ -167,7 +174,7 @@ def check_rod_standing(engine: TwinEngine, name: str = "rod", max_tilt_deg: floa
     axis = T[:3, 2]
     radius, half = obj.size_m[0] / 2, obj.size_m[2] / 2
     rim = radius * np.sqrt(max(0.0, 1.0 - axis[2] ** 2))
-    lowest = float(min(T[2, 3] + half * axis[2], T[2, 3] - half * axis[2]) - rim)
+    lowest = float(min(T[2, 3] + half * axis[2], T[2, 3] - half * axis[2]) - rim) - engine.scene.table_z_m
     lin, ang = object_velocity(engine, name)
     at_rest = lin < REST_LINEAR_M_S and ang < REST_ANGULAR_RAD_S
     opened = (not engine.gripper_closed) and engine.gripper_opening_m > obj.size_m[0] + 0.002
@@ -176,7 +183,7 @@ def check_rod_standing(engine: TwinEngine, name: str = "rod", max_tilt_deg: floa
     if tilt > max_tilt_deg:
         reasons.append(f"tilted {tilt:.1f}° (> {max_tilt_deg}°)")
     if abs(lowest) > ON_TABLE_TOL_M:
-        reasons.append(f"lowest point at z = {lowest * 1000:.1f} mm, not on the table")
+        reasons.append(f"lowest point {lowest * 1000:.1f} mm from the table top, not on the table")
     if not at_rest:
         reasons.append(f"moving ({lin * 1000:.1f} mm/s, {np.degrees(ang):.1f}°/s)")
     if not opened:

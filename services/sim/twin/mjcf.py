@@ -20,6 +20,7 @@ from scipy.spatial.transform import Rotation
 
 from services.common.settings import GripperSettings, TwinCameraSettings, TwinPhysicsSettings
 from services.kinematics.robot_models import RobotSpec
+from services.sim.twin.randomization import Variation
 from services.sim.twin.scene import COLORS_RGBA, Scene, SceneObject, hollow_tube_inertia
 
 Array = np.ndarray
@@ -101,6 +102,41 @@ def camera_axes(cam: TwinCameraSettings) -> tuple[Array, Array, Array]:
     return right, up, fwd
 
 
+def camera_pose(camera: TwinCameraSettings, variation: Variation | None = None) -> Array:
+    """T_base_camera of the optical frame (x right, y down, z forward): the nominal mount, or the true
+    one of a varied world (offset in the base frame, rotation in the nominal optical frame)."""
+    right, up, fwd = camera_axes(camera)
+    T = np.eye(4)
+    T[:3, :3] = np.column_stack([right, -up, fwd])
+    T[:3, 3] = camera.position_m
+    if variation is not None:
+        T[:3, :3] = T[:3, :3] @ variation.camera_rotation()
+        T[:3, 3] += np.asarray(variation.camera_offset_m)
+    return T
+
+
+def _camera_attrs(camera: TwinCameraSettings, variation: Variation | None) -> dict[str, str]:
+    """MJCF camera attributes: the nominal camera (fovy), or a varied one with its true pose and
+    intrinsics (focal length and principal point in pixels; MuJoCo moves the principal point by minus
+    ``principalpixel``)."""
+    T = camera_pose(camera, variation)
+    right, up = T[:3, 0], -T[:3, 1]
+    attrs = {"name": CAMERA, "pos": _f(*T[:3, 3]), "xyaxes": _f(*right, *up)}
+    if variation is None or (variation.focal_scale == 1.0 and variation.principal_offset_px == (0.0, 0.0)):
+        attrs["fovy"] = _f(camera.fovy_deg)
+        return attrs
+    f_px = (camera.height / 2.0) / np.tan(np.radians(camera.fovy_deg) / 2.0) * variation.focal_scale
+    pixel_m = 1e-5  # any sensor pitch: MuJoCo only uses the ratios
+    du, dv = variation.principal_offset_px
+    attrs.update(
+        resolution=f"{camera.width} {camera.height}",
+        sensorsize=_f(camera.width * pixel_m, camera.height * pixel_m),
+        focalpixel=_f(f_px, f_px),
+        principalpixel=_f(-du, -dv),
+    )
+    return attrs
+
+
 def build_mjcf(
     spec: RobotSpec,
     gripper: GripperSettings,
@@ -108,8 +144,13 @@ def build_mjcf(
     camera: TwinCameraSettings,
     scene: Scene,
     gains: ArmGains | None = None,
+    variation: Variation | None = None,
 ) -> str:
-    """The cell as an MJCF string. Without ``gains`` the arm actuators get unit placeholders."""
+    """The cell as an MJCF string. Without ``gains`` the arm actuators get unit placeholders.
+
+    ``physics`` carries the world's frictions and grip force; ``variation`` (a randomized world) moves
+    the camera to its true mount and intrinsics and scales the lights."""
+    light = 1.0 if variation is None else variation.light_scale
     root = ET.Element("mujoco", model=f"pickplace_cell_{spec.name}")
     ET.SubElement(root, "compiler", angle="radian", autolimits="true")
     ET.SubElement(
@@ -130,7 +171,11 @@ def build_mjcf(
     ET.SubElement(visual, "map", znear="0.01", zfar="5")
     ET.SubElement(visual, "quality", shadowsize="2048")
     ET.SubElement(
-        visual, "headlight", ambient="0.35 0.35 0.35", diffuse="0.35 0.35 0.35", specular="0.05 0.05 0.05"
+        visual,
+        "headlight",
+        ambient=_f(*[0.35 * light] * 3),
+        diffuse=_f(*[0.35 * light] * 3),
+        specular=_f(*[0.05 * light] * 3),
     )
 
     asset = ET.SubElement(root, "asset")
@@ -174,7 +219,8 @@ def build_mjcf(
         friction=_f(physics.object_friction, 0.005, 0.0001),
     )
     pad = ET.SubElement(default, "default", attrib={"class": "pad"})
-    # priority 1: pad–object contacts use the pad's condim, friction and solref, not a mix of both.
+    # priority 2: pad–object contacts use the pad's condim, friction and solref, not a mix of both (an
+    # object with its own friction has priority 1 over the table and the other objects).
     # A stiff contact (time constant 2 timesteps, >= 4 ms): with the default 20 ms the light fingers
     # sink ~1.5 mm into the rod under a 10 N squeeze and the rod creeps out toward the fingertips.
     ET.SubElement(
@@ -184,7 +230,7 @@ def build_mjcf(
         conaffinity="1",
         group="1",
         condim="4",
-        priority="1",
+        priority="2",
         friction=_f(physics.pad_friction, physics.pad_torsional_friction_m, 0.0001),
         solref=_f(max(0.004, 2 * physics.timestep_s), 1.0),
         material="robot_dark",
@@ -198,17 +244,18 @@ def build_mjcf(
         directional="true",
         pos="0.4 0.6 3",
         dir="-0.2 -0.3 -1",
-        diffuse="0.55 0.55 0.55",
-        specular="0.2 0.2 0.2",
+        diffuse=_f(*[0.55 * light] * 3),
+        specular=_f(*[0.2 * light] * 3),
         castshadow="true",
     )
-    # The table top is the plane z = 0 of the base frame (the robot stands on it).
+    # The table top is the plane z = table_z_m of the base frame (0: the robot stands on it).
     ET.SubElement(
         world,
         "geom",
         name=TABLE_GEOM,
         type="plane",
         size="1.2 1.2 0.02",
+        pos=_f(0, 0, scene.table_z_m),
         material="table",
         attrib={"class": "env"},
     )
@@ -234,15 +281,7 @@ def build_mjcf(
             material="obstacle",
             attrib={"class": "env"},
         )
-    right, up, _fwd = camera_axes(camera)
-    ET.SubElement(
-        world,
-        "camera",
-        name=CAMERA,
-        pos=_f(*camera.position_m),
-        xyaxes=_f(*right, *up),
-        fovy=_f(camera.fovy_deg),
-    )
+    ET.SubElement(world, "camera", _camera_attrs(camera, variation))
 
     _add_arm(world, spec, gripper)
     for o in scene.objects:
@@ -385,15 +424,16 @@ def _add_object(world: ET.Element, o: SceneObject) -> None:
             body, "inertial", pos="0 0 0", mass=_f(o.mass_kg), diaginertia=_f(i_perp, i_perp, i_axial)
         )
         # A cylinder (flat ends): a capsule can never stand.
-        ET.SubElement(
-            body,
-            "geom",
-            name=f"{o.name}_geom",
-            type="cylinder",
-            size=_f(r, length / 2),
-            material="rod_metal",
-            attrib={"class": "object"},
-        )
+        attrs = {
+            "name": f"{o.name}_geom",
+            "type": "cylinder",
+            "size": _f(r, length / 2),
+            "material": "rod_metal",
+            "class": "object",
+        }
+        if o.friction is not None:  # its own friction wins over the table's (the pads' wins over it)
+            attrs.update(friction=_f(o.friction, 0.005, 0.0001), priority="1")
+        ET.SubElement(body, "geom", attrs)
     else:
         ET.SubElement(
             body,

@@ -13,6 +13,7 @@ from services.kinematics.robot_models import RobotSpec, get_robot
 from services.kinematics.tool import tool_frame
 from services.sim.twin import mjcf
 from services.sim.twin.calibration_board import add_calibration_board
+from services.sim.twin.randomization import Variation, nominal_variation, variation_for
 from services.sim.twin.scene import Scene, sample_scene
 
 Array = np.ndarray
@@ -37,6 +38,7 @@ class TwinWorld:
     xml: str
     gains: mjcf.ArmGains
     T_flange_tool: Array  # the cell's one TCP frame (services.kinematics.tool)
+    variation: Variation  # what this world is really like (randomization.py; nominal unless randomized)
     arm_qpos: Array = field(init=False)
     arm_dof: Array = field(init=False)
     arm_act: Array = field(init=False)
@@ -143,14 +145,36 @@ def arm_gains(model: mujoco.MjModel, arm_qpos: Array, arm_dof: Array, bandwidth:
     return mjcf.ArmGains(kp=tuple(float(v) for v in kp), kv=tuple(float(v) for v in kv))
 
 
-def build_world(settings: Settings, seed: int | None = None, scene: Scene | None = None) -> TwinWorld:
-    """Compile the cell for the configured robot and a seeded (or given) scene."""
+def build_world(
+    settings: Settings, seed: int | None = None, scene: Scene | None = None, variation: Variation | None = None
+) -> TwinWorld:
+    """Compile the cell for the configured robot and a seeded (or given) scene.
+
+    With ``sim.twin.randomization.enabled`` the world is the seed's :class:`Variation` (rod, frictions,
+    table height, grip force, tracking, camera, light), or the given ``variation``; a given ``scene`` keeps
+    its own objects (and the nominal world unless a ``variation`` is given too)."""
     twin = settings.sim.twin
     spec = get_robot(settings.robot.model)
+    seed = settings.sim.seed if seed is None else seed
+    if variation is None:
+        variation = variation_for(twin, seed) if scene is None else nominal_variation(twin)
     if scene is None:
-        scene = sample_scene(twin.scene, settings.sim.seed if seed is None else seed)
-    args = (spec, settings.gripper, twin.physics, twin.camera, scene)
-    draft_xml = mjcf.build_mjcf(*args)
+        scene = sample_scene(
+            variation.scene_settings(twin.scene),
+            seed,
+            table_z_m=variation.table_height_m,
+            rod_friction=variation.rod_table_friction if variation.randomized else None,
+        )
+    physics = twin.physics.model_copy(
+        update={
+            "pad_friction": variation.pad_friction,
+            "grip_force_n": variation.grip_force_n,
+            "tracking_bandwidth_rad_s": variation.tracking_bandwidth_rad_s,
+        }
+    )
+    cam_variation = variation if variation.randomized else None
+    args = (spec, settings.gripper, physics, twin.camera, scene)
+    draft_xml = mjcf.build_mjcf(*args, variation=cam_variation)
     if twin.calibration_board:  # its mass counts in the gains
         draft_xml = add_calibration_board(draft_xml, settings.vision.calibration.board, settings.gripper)
     draft = _compile(draft_xml)
@@ -159,8 +183,8 @@ def build_world(settings: Settings, seed: int | None = None, scene: Scene | None
         [draft.jnt_qposadr[mujoco.mj_name2id(draft, mujoco.mjtObj.mjOBJ_JOINT, n)] for n in names]
     )
     dadr = np.array([draft.jnt_dofadr[mujoco.mj_name2id(draft, mujoco.mjtObj.mjOBJ_JOINT, n)] for n in names])
-    gains = arm_gains(draft, qadr, dadr, twin.physics.tracking_bandwidth_rad_s)
-    xml = mjcf.build_mjcf(*args, gains=gains)
+    gains = arm_gains(draft, qadr, dadr, physics.tracking_bandwidth_rad_s)
+    xml = mjcf.build_mjcf(*args, gains=gains, variation=cam_variation)
     if twin.calibration_board:
         xml = add_calibration_board(xml, settings.vision.calibration.board, settings.gripper)
     return TwinWorld(
@@ -172,4 +196,5 @@ def build_world(settings: Settings, seed: int | None = None, scene: Scene | None
         xml=xml,
         gains=gains,
         T_flange_tool=tool_frame(settings),
+        variation=variation,
     )

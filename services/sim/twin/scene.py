@@ -48,6 +48,7 @@ class SceneObject:
     position_m: tuple[float, float, float]
     quat_wxyz: tuple[float, float, float, float]
     inner_radius_m: float = 0.0  # rod only: hollow tube
+    friction: float | None = None  # sliding friction against everything but the pads; None = the class's
 
     @property
     def T_base_object(self) -> Array:
@@ -71,6 +72,7 @@ class Scene:
     objects: tuple[SceneObject, ...]
     obstacle: BoxObstacle | None
     layout_redraws: int = 0  # layouts drawn again from derived seeds before every object fitted
+    table_z_m: float = 0.0  # height of the table top in the base frame (the objects stand on it)
 
     def get(self, name: str) -> SceneObject:
         for obj in self.objects:
@@ -134,34 +136,44 @@ def obstacle_of(settings: TwinSceneSettings) -> BoxObstacle | None:
     return BoxObstacle("obstacle", settings.obstacle_center_m, settings.obstacle_half_size_m)
 
 
-def sample_scene(settings: TwinSceneSettings, seed: int) -> Scene:
+def sample_scene(
+    settings: TwinSceneSettings, seed: int, table_z_m: float = 0.0, rod_friction: float | None = None
+) -> Scene:
     """Random rod pose (position in the pick zone, yaw) and cube layout, reproducible from ``seed``;
-    redrawn from derived seeds when a draw cannot place every object (recorded on the scene)."""
+    redrawn from derived seeds when a draw cannot place every object (recorded on the scene).
+
+    ``table_z_m`` raises the table top (and everything on it) above the base plane; ``rod_friction`` is the
+    rod's own sliding friction (on the table and the cubes; the pads keep theirs)."""
     if not isinstance(seed, int | np.integer) or seed < 0:
         raise InvalidInputError(f"scene seed must be a non-negative integer, got {seed!r}")
     last: _Unplaceable | None = None
     for k in range(MAX_LAYOUT_REDRAWS + 1):
         rng = np.random.default_rng(int(seed) if k == 0 else np.random.SeedSequence([int(seed), k]))
         try:
-            objects, obstacle = _draw_layout(settings, rng)
+            objects, obstacle = _draw_layout(settings, rng, float(table_z_m), rod_friction)
         except _Unplaceable as exc:
             last = exc
             continue
         if k:
             log.info("scene seed %d: layout redrawn %d time(s) (%s)", seed, k, last)
-        return Scene(seed=int(seed), objects=objects, obstacle=obstacle, layout_redraws=k)
+        return Scene(
+            seed=int(seed), objects=objects, obstacle=obstacle, layout_redraws=k, table_z_m=float(table_z_m)
+        )
     raise InvalidInputError(
         f"{last} — in {MAX_LAYOUT_REDRAWS + 1} layouts from seed {seed}: enlarge the zone or remove objects"
     )
 
 
 def _draw_layout(
-    settings: TwinSceneSettings, rng: np.random.Generator
+    settings: TwinSceneSettings, rng: np.random.Generator, table_z: float, rod_friction: float | None
 ) -> tuple[tuple[SceneObject, ...], BoxObstacle | None]:
     lo = np.asarray(settings.pick_zone_min_m, dtype=float)
     hi = np.asarray(settings.pick_zone_max_m, dtype=float)
     placed: list[_Footprint] = []
     obstacle = obstacle_of(settings)
+    if obstacle is not None and table_z:
+        cx, cy, cz = obstacle.center_m
+        obstacle = BoxObstacle(obstacle.name, (cx, cy, cz + table_z), obstacle.half_size_m)
     if obstacle is not None:
         c, h = np.asarray(obstacle.center_m[:2]), np.asarray(obstacle.half_size_m[:2])
         axis = 0 if h[0] >= h[1] else 1
@@ -187,9 +199,10 @@ def _draw_layout(
                 color="black",
                 size_m=(2 * r, 2 * r, settings.rod_length_m),
                 mass_kg=settings.rod_mass_kg,
-                position_m=(float(xy[0]), float(xy[1]), r),
+                position_m=(float(xy[0]), float(xy[1]), table_z + r),
                 quat_wxyz=_yaw_quat(yaw, lying=True),
                 inner_radius_m=r - settings.rod_wall_m,
+                friction=rod_friction,
             )
         )
     s = settings.cube_size_m
@@ -207,7 +220,7 @@ def _draw_layout(
                 color=color,
                 size_m=(s, s, s),
                 mass_kg=settings.cube_mass_kg,
-                position_m=(float(xy[0]), float(xy[1]), s / 2),
+                position_m=(float(xy[0]), float(xy[1]), table_z + s / 2),
                 quat_wxyz=_yaw_quat(yaw, lying=False),
             )
         )

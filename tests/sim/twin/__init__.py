@@ -1,0 +1,1 @@
+"""Tests of the twin's per-trial worlds (services/sim/twin)."""
