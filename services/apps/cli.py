@@ -129,10 +129,15 @@ def evaluate(
     load: Annotated[
         int, typer.Option(min=0, help="run N busy processes beside the cell (outcomes must not change)")
     ] = 0,
+    nominal: Annotated[
+        bool,
+        typer.Option("--nominal", help="no per-trial randomization: every trial in the configured world"),
+    ] = False,
     profile: ProfileOpt = None,
     config: ConfigOpt = None,
 ) -> None:
-    """Run N seeded pick trials in the twin and report success, cycle time and failures."""
+    """Run N seeded pick trials in the twin, each in its own randomized world (sim.twin.randomization),
+    and report success with its 95 % interval, cycle time, failures and success per parameter bin."""
     from pathlib import Path
 
     from services.apps.evaluation import print_report, run_eval, write_report
@@ -155,7 +160,7 @@ def evaluate(
     error = None
     if calibration_error_mm or calibration_error_deg:
         error = (calibration_error_mm / 1000.0, calibration_error_deg)
-    report = _run(run_eval(s, trials, seed, task, error, console, load=load))
+    report = _run(run_eval(s, trials, seed, task, error, console, load=load, randomize=not nominal))
     if report is None:
         return
     print_report(report, console)
