@@ -1,4 +1,5 @@
-"""Benchmark of the physics twin: real-time factor, ms per RGB-D frame, pick-and-stand trial time.
+"""Benchmark of the physics twin: real-time factor, ms per RGB-D frame, pick-and-stand trial time, and
+the cost of a randomized world (what `pickplace eval` builds for every trial).
 
 Run alone with ``python -m bench.bench_twin`` (``python -m bench`` calls ``main()``).
 """
@@ -17,6 +18,7 @@ import numpy as np
 from services.common.settings import Settings, load_settings
 from services.sim.twin import create_twin_engine
 from services.sim.twin.camera import TwinCamera
+from services.sim.twin.model import build_world
 from services.sim.twin.trial import TICK_S, run_rod_stand_trial
 
 HOME = np.deg2rad([0.0, 0.0, 90.0, 0.0, -90.0, 0.0])
@@ -63,6 +65,34 @@ def frame_times(n: int = 20) -> dict[str, float]:
     return out
 
 
+def randomized_world_times(n: int = 10) -> dict[str, float]:
+    """ms to build (MJCF + compile + gains) a nominal and a randomized world, and per noisy frame in one."""
+    nominal = _settings()
+    rnd = nominal.sim.twin.randomization.model_copy(update={"enabled": True})
+    randomized = nominal.model_copy(
+        update={
+            "sim": nominal.sim.model_copy(
+                update={"twin": nominal.sim.twin.model_copy(update={"randomization": rnd})}
+            )
+        }
+    )
+    out: dict[str, float] = {}
+    for label, s in (("nominal", nominal), ("randomized", randomized)):
+        t0 = time.perf_counter()
+        for seed in range(n):
+            build_world(s, seed)
+        out[f"build_{label}_ms"] = (time.perf_counter() - t0) / n * 1000
+    engine = create_twin_engine(randomized, seed=0)
+    cam = TwinCamera(engine, seed=0)
+    cam.capture()
+    t0 = time.perf_counter()
+    for _ in range(n):
+        cam.capture()
+    out["frame_randomized_ms"] = (time.perf_counter() - t0) / n * 1000
+    cam.close()
+    return out
+
+
 def trials(seeds: range, physics: dict[str, Any] | None = None) -> dict[str, float]:
     settings = _settings({"cubes": [], "obstacle": False}, physics)
     ok, walls, sims, slips_mm, slips_deg, tilt_before = 0, [], [], [], [], []
@@ -100,6 +130,9 @@ def main() -> None:
     print(f"real-time factor {rtf:.1f}x  ({us:.0f} µs per 8 ms control tick, full scene, arm moving)")
     print("== twin: simulated RealSense 640x480 (colour + depth + segmentation passes) ==")
     for k, v in frame_times().items():
+        print(f"{k:24s} {v:7.1f} ms")
+    print("== twin: per-trial randomized world (sim.twin.randomization) ==")
+    for k, v in randomized_world_times().items():
         print(f"{k:24s} {v:7.1f} ms")
     print("== twin: scripted pick-lift-turn-stand trial (rod only, perfect perception) ==")
     for label, physics in (("default (impratio 10)", None), ("impratio 1", {"impratio": 1.0})):
