@@ -46,7 +46,8 @@ class CountingFile:
     def __init__(self, raw: BinaryIO, path: Path):
         self.raw = raw
         self.path = path
-        self.bytes_written = 0
+        self.bytes_written = 0  # every byte handed to the disk (the size check)
+        self.size = 0  # the file's length (the writer seeks back to patch its header)
         self.error: OSError | None = None
 
     def write(self, data: bytes | bytearray) -> int:
@@ -57,6 +58,7 @@ class CountingFile:
                 self.error = exc
             raise
         self.bytes_written += len(data)
+        self.size = max(self.size, self.raw.tell())
         return n if n is not None else len(data)
 
     def seek(self, offset: int, whence: int = 0) -> int:
@@ -209,7 +211,7 @@ class Recorder:
             self._fail(f.path, self._reason(exc))
             return False
         f.close()
-        cur.bytes = f.bytes_written
+        cur.bytes = f.size
         cur.closed_ns = self.clock_ns()
         log.info("%s", cur.line())
         return True

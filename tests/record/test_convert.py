@@ -8,8 +8,8 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 from google.protobuf import descriptor_pb2
-from mcap_protobuf.decoder import DecoderFactory
 from mcap.records import Schema
+from mcap_protobuf.decoder import DecoderFactory
 from pickplace.v1 import common_pb2, robot_pb2, vision_pb2
 from scipy.spatial.transform import Rotation
 
@@ -92,11 +92,20 @@ def _vec(x: float, y: float, z: float) -> vision_pb2.Vec3:
 
 def test_detections_become_one_scene_update_in_the_base_frame_with_labels() -> None:
     objs = vision_pb2.DetectedObjects(header=common_pb2.Header(stamp_ns=5_000_000_000))
-    objs.rods.add(has_base=True, pose_base=common_pb2.Pose(x=0.5, qw=1.0), length_m=0.2, diameter_m=0.022,
-                  confidence=0.9, method="surface_fit")
+    objs.rods.add(
+        has_base=True,
+        pose_base=common_pb2.Pose(x=0.5, qw=1.0),
+        length_m=0.2,
+        diameter_m=0.022,
+        confidence=0.9,
+        method="surface_fit",
+    )
     objs.cubes.add(has_base=False, pose_camera=common_pb2.Pose(z=0.8, qw=1.0), color_label="red")
-    objs.obstacles.add(has_base=True, base=vision_pb2.BoxBounds(min=_vec(0.1, 0.1, 0.0), max=_vec(0.2, 0.3, 0.15)),
-                       color_label="blue")
+    objs.obstacles.add(
+        has_base=True,
+        base=vision_pb2.BoxBounds(min=_vec(0.1, 0.1, 0.0), max=_vec(0.2, 0.3, 0.15)),
+        color_label="blue",
+    )
     update = decode(Topic.DETECTIONS, convert.scene_update(objs, "camera", 0.05))
     assert len(update.deletions) == 1  # the previous scene is replaced
     by_id = {e.id: e for e in update.entities}
@@ -113,7 +122,9 @@ def test_detections_become_one_scene_update_in_the_base_frame_with_labels() -> N
 
 
 def test_robot_status_names_the_mode_and_each_alarm() -> None:
-    view = json.loads(convert.robot_status_view(robot_pb2.RobotStatus(robot_mode=9, alarms=[117], connected=True)))
+    view = json.loads(
+        convert.robot_status_view(robot_pb2.RobotStatus(robot_mode=9, alarms=[117], connected=True))
+    )
     assert view["mode_name"] == "ERROR"
     assert view["alarms"][0]["id"] == 117 and view["alarms"][0]["meaning"] not in ("", "alarm 117")
 

@@ -36,7 +36,9 @@ def test_files_split_by_size_each_one_self_describing_and_indexed(
 ) -> None:
     settings = RecordSettings(max_file_bytes=16_384, chunk_bytes=4096)
     caplog.set_level(logging.INFO, logger="pickplace.record")
-    rec = Recorder(settings, tmp_path, prefix="cell1", attachments={"nova5.urdf": ("application/xml", b"<robot/>")})
+    rec = Recorder(
+        settings, tmp_path, prefix="cell1", attachments={"nova5.urdf": ("application/xml", b"<robot/>")}
+    )
     for i in range(2000):
         rec.log(Topic.JOINT_STATES, joint_state(i), 1_000 + i)
         if i % 500 == 0:
@@ -59,6 +61,7 @@ def test_files_split_by_size_each_one_self_describing_and_indexed(
         assert summary.statistics.message_count == len(messages)
         total += len(messages)
     assert total == 2000 + 4
+    assert [f.bytes for f in rec.files] == [p.stat().st_size for p in paths]
     lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("recorded ")]
     assert len(lines) == len(paths) and all(str(p) in line for p, line in zip(paths, lines, strict=True))
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import json
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -25,6 +26,7 @@ class FoxgloveClient:
     _ws: Any = None
     _task: asyncio.Task[None] | None = None
     _advertised: asyncio.Event = field(default_factory=asyncio.Event)
+    _message: asyncio.Event = field(default_factory=asyncio.Event)
 
     async def __aenter__(self) -> FoxgloveClient:
         self._ws = await websockets.connect(self.url, subprotocols=SUBPROTOCOLS, max_size=None)  # type: ignore[list-item]
@@ -50,6 +52,7 @@ class FoxgloveClient:
             elif frame[0] == OP_MESSAGE_DATA:
                 sub_id, log_time = struct.unpack_from("<IQ", frame, 1)
                 self.received.setdefault(self._subs[sub_id], []).append((log_time, bytes(frame[13:])))
+                self._message.set()
 
     async def wait_for_channels(self, topics: set[str], timeout_s: float = 10.0) -> None:
         async with asyncio.timeout(timeout_s):
@@ -64,3 +67,13 @@ class FoxgloveClient:
             self._subs[sub_id] = topic
             subs.append({"id": sub_id, "channelId": self.channels[topic]["id"]})
         await self._ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
+
+    def count(self, topic: str) -> int:
+        return len(self.received.get(topic, []))
+
+    async def wait_until(self, done: Callable[[], bool], timeout_s: float = 10.0) -> None:
+        """Until ``done()`` holds, checked on every message that arrives."""
+        async with asyncio.timeout(timeout_s):
+            while not done():
+                self._message.clear()
+                await self._message.wait()

@@ -1,0 +1,112 @@
+"""``pickplace serve record``: the live view and recorder of a cell whose services run elsewhere, fed by Zenoh."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from pickplace.v1 import common_pb2, vision_pb2
+
+from services.apps.record_cli import serve_record
+from services.common.bus import Bus
+from services.common.keys import CellKeys
+from services.common.sensors import CameraIntrinsics, RGBDFrame, frame_to_msg
+from services.common.settings import load_settings
+from services.record.channels import Topic
+from tests.conftest import free_port
+from tests.record.wsclient import FoxgloveClient
+
+pytestmark = [pytest.mark.integration]
+
+
+def recorded_counts(directory: Path) -> dict[str, int]:
+    files = list(directory.glob("*.mcap"))
+    assert len(files) == 1
+    with files[0].open("rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and summary.statistics is not None
+    return {summary.channels[c].topic: n for c, n in summary.statistics.channel_message_counts.items()}
+
+
+async def connect(url: str) -> FoxgloveClient:
+    """The server starts inside the service task: the first connection may find no listener yet."""
+    async with asyncio.timeout(20):
+        while True:
+            try:
+                return await FoxgloveClient(url).__aenter__()
+            except OSError:
+                await asyncio.sleep(0.05)  # a retry of a refused connection, not a wait on a state
+
+
+async def test_serve_record_takes_the_cell_from_the_bus(tmp_path: Path) -> None:
+    zport, fport = free_port(), free_port()
+    s = load_settings(
+        "sim",
+        overrides={
+            "logging": {"file": None},
+            "zenoh": {"listen": [f"tcp/127.0.0.1:{zport}"]},
+            "grpc": {"robot_port": free_port(), "request_timeout_s": 0.2},  # no robot there: status says so
+            "record": {"dir": str(tmp_path), "foxglove": {"port": fport}, "camera_rate_hz": 100.0},
+        },
+    )
+    keys = CellKeys(s.cell_id)
+    task = asyncio.create_task(serve_record(s))
+    peer = s.zenoh.model_copy(update={"listen": [f"tcp/127.0.0.1:{free_port()}"], "connect": s.zenoh.listen})
+    try:
+        async with Bus(peer) as bus:
+            client = await connect(f"ws://127.0.0.1:{fport}")
+            try:
+                await client.wait_for_channels({Topic.JOINT_STATES, Topic.CAMERA_COLOR})
+                await client.subscribe(Topic.JOINT_STATES, Topic.ROBOT_STATUS, Topic.CAMERA_COLOR)
+                seq = 0
+
+                def publish_state() -> None:
+                    nonlocal seq
+                    seq += 1
+                    js = common_pb2.JointState(
+                        header=common_pb2.Header(seq=seq), position=[0.01] * 6, robot_mode=5
+                    )
+                    bus.publish(keys.joint_states, js)
+
+                async with asyncio.timeout(20):  # until the Zenoh subscription has reached this peer
+                    while not client.count(Topic.JOINT_STATES):
+                        publish_state()
+                        try:
+                            await client.wait_until(lambda: client.count(Topic.JOINT_STATES) > 0, 0.1)
+                        except TimeoutError:
+                            pass
+                for _ in range(50):
+                    publish_state()
+                intr = CameraIntrinsics(width=16, height=12, fx=20.0, fy=20.0, cx=8.0, cy=6.0)
+                frame = RGBDFrame(
+                    np.full((12, 16, 3), 90, np.uint8),
+                    np.full((12, 16), 700, np.uint16),
+                    intr,
+                    stamp_ns=123,
+                    seq=1,
+                )
+                bus.publish(keys.camera_frames, frame_to_msg(frame))
+                bus.publish(keys.detected_objects, vision_pb2.DetectedObjects())
+                await client.wait_until(
+                    lambda: (
+                        client.count(Topic.JOINT_STATES) >= 51
+                        and client.count(Topic.ROBOT_STATUS) > 0
+                        and client.count(Topic.CAMERA_COLOR) > 0
+                    )
+                )
+            finally:
+                await client.__aexit__(None, None, None)
+    finally:
+        task.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await task
+    status = [json.loads(p) for _t, p in client.received[Topic.ROBOT_STATUS]]
+    assert any(not st["connected"] for st in status)  # the robot's gRPC is not there, and it says so
+    counts = recorded_counts(tmp_path)
+    # the recorder has every state the live client saw (and the first ones, before the client's subscription)
+    assert seq >= counts[Topic.JOINT_STATES] >= client.count(Topic.JOINT_STATES) >= 51
+    assert counts[Topic.CAMERA_COLOR] == 1 and counts[Topic.DETECTIONS] == 1
