@@ -282,6 +282,7 @@ class RobotService(GrpcShell):
     async def _start(self, stack: contextlib.AsyncExitStack) -> None:
         client = self.driver.client
         stack.push_async_callback(client.close)
+        stack.push_async_callback(self.driver.close)
         await self.driver.start()
         client.add_listener(self.hub.on_feedback)
         stack.callback(client.remove_listener, self.hub.on_feedback)

@@ -45,6 +45,14 @@ class RobotSettings(Model):
     servo_lookahead: int = Field(4, ge=1, le=100, description="ServoJ targets queued ahead of execution")
     reconnect: ReconnectSettings = ReconnectSettings()
     workspace: WorkspaceBounds = WorkspaceBounds()
+    # Execution monitoring: measured joints against the plan during every motion (path) and at its
+    # end (goal, reached within goal_settle_s of controller time); beyond either the arm is stopped.
+    path_tolerance_rad: float = Field(0.05, gt=0, le=1.0)
+    goal_tolerance_rad: float = Field(0.005, gt=0, le=0.5)
+    goal_settle_s: float = Field(0.5, ge=0, le=10)
+    # ServoJ feed watchdog: a stream the host still owes targets is stopped once the controller has run
+    # dry for a period plus this long (controller and host clocks both)
+    servo_watchdog_margin_s: float = Field(0.25, gt=0, le=10)
     # Cap on joint speed the driver accepts in a trajectory, as a fraction of the model's limit.
     max_velocity_scale: float = Field(1.0, gt=0, le=1.0)
     allow_remote: bool = Field(
