@@ -30,12 +30,12 @@ from services.common.errors import (
 )
 from services.common.settings import Settings
 from services.dobot import RobotMode
-from services.kinematics import analytic
 from services.kinematics.robot_models import RobotSpec
 from services.kinematics.trajectory import JointTrajectory
 from services.robot.client import FeedbackState, LinkState
 from services.robot.gripper import DigitalOutputGripper, GripperState
 from services.robot.link import ControllerLink
+from services.robot.monitor import MoveMonitor, StreamMonitor, goal_deviation
 from services.robot.safety import SafetyLimits
 
 log = logging.getLogger("pickplace.robot.driver")
@@ -82,10 +82,26 @@ class RobotDriver:
         self._continue_from: np.ndarray | None = None
         self._continue_id: int | None = None  # the queue ID of that target
         self._continue_tail: np.ndarray | None = None  # its last two targets (the acceleration check)
+        # execution monitoring: the monitor of the motion under way (a stream, a continuation's gap, a
+        # move), fed every packet by one listener; a trip sets ``_tripped`` (the running motion stops)
+        self._monitor: StreamMonitor | MoveMonitor | None = None
+        self._tripped = asyncio.Event()
+        self._gap_task: asyncio.Task[None] | None = None  # watches a continuation until the next comes
+        self.watchdog_trips = 0  # ServoJ streams stopped for want of targets
+        self.monitor_trips = 0  # motions stopped for leaving their path or missing their goal
+        self.last_fault: ExecutionError | None = None
+        self.last_fault_stamp_ms: int | None = None  # the packet that tripped it (controller clock)
 
     async def start(self) -> None:
+        self.client.add_listener(self._on_feedback)
         await self.client.connect()
         await self._send_ratios()
+
+    async def close(self) -> None:
+        """Stop watching (the link is closed by its owner)."""
+        self.client.remove_listener(self._on_feedback)
+        await self._end_gap_watch(handle_trip=False)
+        self._monitor = None
 
     async def _send_ratios(self) -> None:
         await self.client.speed_factor(self.settings.robot.speed_ratio)
@@ -143,7 +159,7 @@ class RobotDriver:
         """Stop queued motion and abort any trajectory being streamed."""
         self._abort_by_estop = False
         self._abort.set()
-        self._continue_from = None
+        self._forget_stream()
         await self.client.stop()
 
     async def emergency_stop(self, release: bool = False) -> None:
@@ -153,8 +169,108 @@ class RobotDriver:
             # path), even before the feedback shows the e-stop
             self._abort_by_estop = True
             self._abort.set()
-            self._continue_from = None
+            self._forget_stream()
         await self.client.emergency_stop(press=not release)
+
+    def _forget_stream(self) -> None:
+        """Nothing continues: no next trajectory follows the last one, no monitor watches a gap."""
+        self._continue_from = self._continue_tail = None
+        if self._gap_task is not None and not self._gap_task.done():
+            self._gap_task.cancel()
+        self._gap_task = None
+        if isinstance(self._monitor, StreamMonitor) and not self._motion_lock.locked():
+            self._monitor = None
+
+    # ------------------------------------------------------------------ monitoring
+    def _on_feedback(self, fb: FeedbackState) -> None:
+        monitor = self._monitor
+        if monitor is not None and monitor.fault is None and monitor.on_feedback(fb) is not None:
+            self.last_fault = monitor.fault
+            self.last_fault_stamp_ms = fb.timestamp_ms
+            self._tripped.set()
+
+    def _watch(self, monitor: StreamMonitor | MoveMonitor) -> None:
+        self._tripped.clear()
+        self._monitor = monitor
+
+    async def _monitored(self, work: Awaitable[T], what: str) -> T:
+        """Run ``work`` while the monitor watches; when it trips, cut ``work``, stop the arm, raise."""
+        task: asyncio.Task[T] = asyncio.ensure_future(work)
+        trip = asyncio.ensure_future(self._tripped.wait())
+        try:
+            await asyncio.wait({task, trip}, return_when=asyncio.FIRST_COMPLETED)
+            if task.done():
+                return task.result()
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await task
+            raise await self._stop_for_fault(what)
+        finally:
+            trip.cancel()
+            if not task.done():
+                task.cancel()
+
+    async def _stop_for_fault(self, what: str) -> ExecutionError:
+        """The monitor tripped: stop the arm, count it, and return the error to raise."""
+        fault = self.last_fault or ExecutionError(f"{what}: execution monitor tripped")
+        self._continue_from = self._continue_tail = None
+        self._monitor = None
+        log.error("%s: %s", what, fault)
+        await self._send_stop(what)
+        if "watchdog" in str(fault):
+            self.watchdog_trips += 1
+        else:
+            self.monitor_trips += 1
+        return fault
+
+    async def _send_stop(self, why: str) -> None:
+        """Stop the controller's queue, even while the caller is being cancelled."""
+        stop = asyncio.ensure_future(self.client.stop())
+        stop.add_done_callback(_retrieve)  # finished after a cancelled caller: its outcome is logged
+        try:
+            await asyncio.shield(stop)
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:  # the arm's own alarm or a lost link: the link owes the Stop then
+            log.warning("Stop after %s not confirmed: %s", why, exc)
+
+    async def _end_gap_watch(self, handle_trip: bool = True) -> None:
+        """A continuation's successor has come (or the driver closes): end the gap's watch; if it
+        tripped meanwhile, the arm has been (or now is) stopped and nothing continues."""
+        task, self._gap_task = self._gap_task, None
+        if task is None:
+            return
+        if not task.done() and (not handle_trip or not self._tripped.is_set()):
+            task.cancel()  # not tripped: nothing to do (a tripped watch is let finish its Stop)
+        await asyncio.wait({task})
+
+    async def _watch_gap(self) -> None:
+        """After a continuing trajectory: if the next one does not come before the controller runs dry
+        (plus the watchdog margin), stop the arm; the next trajectory is then judged from rest."""
+        await self._tripped.wait()
+        await self._stop_for_fault("the gap after a continuing trajectory")
+
+    async def _check_goal(self, goal: np.ndarray, what: str) -> FeedbackState:
+        """The goal check: the measured joints within the goal tolerance of ``goal`` within
+        ``goal_settle_s`` of controller time; else the arm is stopped and ExecutionError raised."""
+        r = self.settings.robot
+        tol = r.goal_tolerance_rad
+        try:
+            return await self.client.wait_controller(
+                lambda f: abs(goal_deviation(f.q, goal).rad) <= tol, r.goal_settle_s
+            )
+        except TimeoutError:
+            fb = self.feedback
+            dev = goal_deviation(fb.q, goal)
+            self.monitor_trips += 1
+            self.last_fault = ExecutionError(
+                f"execution monitor: {what} ended with {dev.describe()} its goal after "
+                f"{r.goal_settle_s:.2f} s (goal tolerance {np.rad2deg(tol):.2f}°); arm stopped"
+            )
+            self.last_fault_stamp_ms = fb.timestamp_ms
+            log.error("%s", self.last_fault)
+            await self._send_stop(what)
+            raise self.last_fault from None
 
     # ------------------------------------------------------------------ motion
     async def _with_retries(self, what: str, step: Callable[[], Awaitable[T]]) -> tuple[T, int]:
@@ -188,6 +304,8 @@ class RobotDriver:
             raise InvalidInputError(f"acceleration ratio must be 1-100, got {a}")
         self._refuse_if_busy("MoveJoints")
         async with self._motion_lock:
+            await self._end_gap_watch()
+            self._forget_stream()
             self._abort.clear()
             self._abort_by_estop = False
             t0 = time.perf_counter()
@@ -199,7 +317,15 @@ class RobotDriver:
                     rid = await self.client.mov_j(q_goal, a=a, v=v)
                 return await self.client.wait_motion_done(rid, self.settings.robot.motion_timeout_s)
 
-            fb, attempts = await self._with_retries("MoveJoints", step)
+            self._watch(MoveMonitor(self.settings.robot.path_tolerance_rad))
+            try:
+                fb, attempts = await self._monitored(self._with_retries("MoveJoints", step), "MoveJoints")
+                fb = await self._check_goal(q_goal, "MoveJoints")
+            except asyncio.CancelledError:  # the caller is gone (a dead client): the arm stops
+                await self._send_stop("a cancelled MoveJoints")
+                raise
+            finally:
+                self._monitor = None
             return MoveResult(fb.q.copy(), time.perf_counter() - t0, attempts)
 
     def _servo_targets(self, traj: JointTrajectory, period: float) -> np.ndarray:
@@ -240,17 +366,41 @@ class RobotDriver:
             raise InvalidInputError(f"servo period must be within 4 ms..1 s, got {period}")
         self._refuse_if_busy("trajectory")
         async with self._motion_lock:
+            await self._end_gap_watch()  # a continuation's successor: the gap's watch ends here
             # every check runs under the lock, on the state the stream will start from: a request that
             # came in while another motion ran is judged against where that motion left the arm
-            targets, q_before = self._checked_targets(traj, period)
+            targets, q_before, following = self._checked_targets(traj, period)
             self._abort.clear()
             self._abort_by_estop = False
-            if stop_when is not None:
-                return await self._guarded(targets, period, stop_when)
-            res = await self._stream(targets, period, wait_done=not continues)
-            if continues:
-                self._continue_from = targets[-1].copy()
-                self._continue_tail = np.vstack([q_before, targets])[-2:].copy()
+            r = self.settings.robot
+            monitor = self._monitor if following and isinstance(self._monitor, StreamMonitor) else None
+            if monitor is None:
+                monitor = StreamMonitor(q_before[-1], period, r.path_tolerance_rad, r.servo_watchdog_margin_s)
+            monitor.period_s = period
+            monitor.owed = True
+            self._watch(monitor)
+            keep_watching = False
+            try:
+                if stop_when is not None:
+                    return await self._guarded(targets, period, stop_when, monitor)
+                res = await self._monitored(
+                    self._stream(targets, period, monitor, wait_done=not continues), "trajectory"
+                )
+                if not continues:
+                    fb = await self._check_goal(targets[-1], "trajectory")
+                    return replace(res, final_q=fb.q.copy())
+                keep_watching = True
+            except asyncio.CancelledError:  # the caller is gone (a dead client): the arm stops now
+                self._continue_from = self._continue_tail = None
+                await self._send_stop("a cancelled trajectory")
+                raise
+            finally:
+                if not keep_watching:
+                    self._monitor = None
+            # the next trajectory continues from here; until it comes, the gap is watched
+            self._continue_from = targets[-1].copy()
+            self._continue_tail = np.vstack([q_before, targets])[-2:].copy()
+            self._gap_task = asyncio.create_task(self._watch_gap(), name="robot-continuation-watch")
             return res
 
     def _refuse_if_busy(self, what: str) -> None:
@@ -260,8 +410,9 @@ class RobotDriver:
                 "wait for it to end or stop it first"
             )
 
-    def _checked_targets(self, traj: JointTrajectory, period: float) -> tuple[np.ndarray, np.ndarray]:
-        """The ServoJ targets of ``traj`` and the two positions they continue from, after every check:
+    def _checked_targets(self, traj: JointTrajectory, period: float) -> tuple[np.ndarray, np.ndarray, bool]:
+        """The ServoJ targets of ``traj``, the two positions they continue from, and whether they
+        follow a continuing trajectory still under way, after every check:
         link, e-stop, alarm, the start against where the arm is (or its last queued target), joint and
         workspace limits, joint speeds and accelerations. Raises before anything is sent."""
         if self.client.link is not LinkState.UP:
@@ -292,9 +443,11 @@ class RobotDriver:
         self.limits.check_all(targets, "trajectory")
         self.limits.check_velocities(targets, period, q_start=q_now)
         self.limits.check_accelerations(targets, period, q_before)
-        return targets, q_before
+        return targets, q_before, following
 
-    async def _stream(self, targets: np.ndarray, period: float, wait_done: bool = True) -> MoveResult:
+    async def _stream(
+        self, targets: np.ndarray, period: float, monitor: StreamMonitor, wait_done: bool = True
+    ) -> MoveResult:
         """Send ServoJ targets, keeping at most ``servo_lookahead`` queued ahead of the one the
         controller is executing (flow control by CurrentCommandId from the feedback stream).
         Pacing therefore follows the controller's own clock — real time on hardware, any speed
@@ -317,11 +470,13 @@ class RobotDriver:
                     raise ControllerError(
                         f"controller alarm during trajectory step {k}: {text}", alarms=tuple(alarm_ids)
                     )
-                ahead = k - self._executed_index(ids, fb.current_command_id)
-                if ahead <= window:
+                if monitor.unstarted(fb.current_command_id) < window:
                     break
                 await self.client.next_feedback()
-            ids.append(await self.client.servo_j(q, period))
+            rid = await self.client.servo_j(q, period)
+            ids.append(rid)
+            monitor.sent(q, rid)
+        monitor.owed = not wait_done  # a stream that ends may run dry; a continuing one must not
         if not wait_done:  # the next trajectory continues the queue: the last target is the result
             self._continue_id = ids[-1]
             return MoveResult(targets[-1].copy(), loop.time() - t0, 1)
@@ -330,7 +485,9 @@ class RobotDriver:
         )
         return MoveResult(fb.q.copy(), loop.time() - t0, 1)
 
-    async def _guarded(self, targets: np.ndarray, period: float, stop_when: StopCondition) -> MoveResult:
+    async def _guarded(
+        self, targets: np.ndarray, period: float, stop_when: StopCondition, monitor: StreamMonitor
+    ) -> MoveResult:
         """Stream while watching every feedback packet; the first one that satisfies
         ``stop_when`` cancels streaming and stops the controller's queue."""
         loop = asyncio.get_running_loop()
@@ -342,7 +499,9 @@ class RobotDriver:
                 fired.set()
 
         self.client.add_listener(watch)
-        stream = asyncio.create_task(self._stream(targets, period), name="guarded-stream")
+        stream = asyncio.create_task(
+            self._monitored(self._stream(targets, period, monitor), "guarded move"), name="guarded-stream"
+        )
         trigger = asyncio.create_task(fired.wait(), name="guarded-trigger")
         try:
             await asyncio.wait({stream, trigger}, return_when=asyncio.FIRST_COMPLETED)
@@ -368,16 +527,6 @@ class RobotDriver:
             return fb.robot_mode in (RobotMode.RUNNING, RobotMode.ENABLE)
         return float(np.max(np.abs(fb.q - self._continue_from))) <= START_TOLERANCE_RAD
 
-    @staticmethod
-    def _executed_index(ids: list[int | None], current_id: int) -> int:
-        """Index of the newest sent target the controller has reached (-1 if none).
-        Without queue IDs (a ``{}`` firmware) nothing can be confirmed: count none as reached."""
-        reached = -1
-        for i, rid in enumerate(ids):
-            if rid is not None and rid <= current_id:
-                reached = i
-        return reached
-
     # ------------------------------------------------------------------ grasp (LLD §13.2)
     async def execute_grasp(
         self,
@@ -386,56 +535,17 @@ class RobotDriver:
         lift_m: float = 0.10,
         speed_scale: float = 0.3,
     ) -> GripperState:
-        """Open, move above the grasp along the tool axis, descend in a straight line, close, lift.
+        """Open, move above the grasp along the tool axis, descend in a straight line, close, lift
+        (:func:`services.robot.grasp_sequence.execute_grasp`)."""
+        from services.robot.grasp_sequence import execute_grasp
 
-        Every segment is checked like any trajectory (joints, speed, workspace) before it is sent;
-        there is no obstacle avoidance here — the task service plans collision-free picks."""
-        from services.kinematics.cartesian import straight_line_joint_path
-        from services.kinematics.interpolation import min_jerk_keypose_trajectory
-        from services.kinematics.trajectory import JointLimits
-
-        if self.limits.T_flange_tool is None:
-            raise InvalidInputError("ExecuteGrasp needs the gripper's tool offset (gripper.tcp_offset_m)")
-        for name, v in (("approach_distance", approach_m), ("lift_distance", lift_m)):
-            if not (np.isfinite(v) and 0.0 <= v <= 0.5):
-                raise InvalidInputError(f"{name} must be within 0..0.5 m, got {v}")
-        if not (np.isfinite(speed_scale) and 0.0 < speed_scale <= 1.0):
-            raise InvalidInputError(f"speed_scale must be within (0, 1], got {speed_scale}")
-        T_grasp = np.asarray(T_base_tool, dtype=float)
-        T_above = T_grasp.copy()
-        T_above[:3, 3] -= approach_m * T_grasp[:3, 2]  # back along the approach (tool z)
-        T_lift = T_grasp.copy()
-        T_lift[2, 3] += lift_m
-        limits = JointLimits.from_spec(self.spec, speed_scale, speed_scale)
-        q_now = self.joint_positions()
-        T_ft = self.limits.T_flange_tool
-        q_above = analytic.solve_nearest(self.spec, T_above @ np.linalg.inv(T_ft), q_now)
-
-        def timed(path: np.ndarray) -> JointTrajectory:
-            return min_jerk_keypose_trajectory(
-                path, 0.05, 0.0, joint_names=self.spec.joint_names, limits=limits, wrap=False
-            )
-
-        # the whole motion is solved and checked before anything moves
-        down = straight_line_joint_path(self.spec, T_above, T_grasp, q_above, T_flange_tool=T_ft)
-        up = straight_line_joint_path(self.spec, T_grasp, T_lift, down[-1], T_flange_tool=T_ft)
-        for name, path in (("approach", np.vstack([q_now, q_above])), ("descent", down), ("lift", up)):
-            self.limits.check_all(path, f"grasp {name}")
-        await self.set_gripper(False)
-        await self.execute_trajectory(timed(np.vstack([q_now, q_above])))
-        await self.execute_trajectory(timed(_thin(down)))
-        state = await self.set_gripper(True)
-        await self.execute_trajectory(timed(_thin(up)))
-        return state
+        return await execute_grasp(self, T_base_tool, approach_m, lift_m, speed_scale)
 
     # ------------------------------------------------------------------ gripper
     async def set_gripper(self, close: bool) -> GripperState:
         return await (self.gripper.close() if close else self.gripper.open())
 
 
-def _thin(path: np.ndarray, knots: int = 20) -> np.ndarray:
-    """At most ``knots`` points of a dense path, always keeping its last point."""
-    if len(path) <= knots:
-        return path
-    idx = np.unique(np.append(np.linspace(0, len(path) - 1, knots).round().astype(int), len(path) - 1))
-    return path[idx]
+def _retrieve(task: asyncio.Future[None]) -> None:
+    if not task.cancelled() and task.exception() is not None:
+        log.warning("Stop not confirmed: %s", task.exception())

@@ -11,6 +11,16 @@ from services.sim.dobot_server import SimDobotServer
 from services.sim.engine import KinematicEngine, MotionEngine
 
 HOME_DEG = (0.0, 0.0, 90.0, 0.0, -90.0, 0.0)
+# beyond this speed the sim runs "as fast as it can": no host can feed a stream in step with it
+WATCHDOG_MAX_SPEED = 100.0
+
+
+def servo_watchdog_margin(margin_s: float | None, speed: float) -> float | None:
+    """The ServoJ watchdog margin in sim time: the host's latency is wall time, which the controller
+    sees ``speed`` times longer; off (None) when asked, or when the sim runs as fast as it can."""
+    if margin_s is None or speed <= 0 or speed > WATCHDOG_MAX_SPEED:
+        return None
+    return margin_s * max(speed, 1.0)
 
 
 def build_engine(settings: Settings, engine: str | None = None) -> MotionEngine:
@@ -46,6 +56,7 @@ def build_sim_server(
             max_joint_speed_deg_s=s.max_joint_speed_deg_s,
             max_joint_acc_deg_s2=s.max_joint_acc_deg_s2,
             robot_type=spec.robot_type_code or 103,
+            servo_watchdog_margin_s=servo_watchdog_margin(s.servo_watchdog_margin_s, s.speed),
         ),
         q0=q0,
     )

@@ -10,10 +10,11 @@ and the clock. Follows the simulator checklist of the protocol spec (§8).
 from __future__ import annotations
 
 import collections
+import enum
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -56,6 +57,22 @@ class ControllerConfig:
     # once its t has run out), which is how a host that stops feeding at a trajectory's end must be
     # served unless it keeps feeding its final target until the arm is there.
     servo_watchdog_margin_s: float | None = None
+
+
+class FaultKind(enum.Enum):
+    """A tracking fault of the arm, injected to test the driver's execution monitoring."""
+
+    LAG = "lag"  # every joint trails its reference (first-order, time constant ``lag_s``): a weak servo
+    STUCK = "stuck"  # ``joint`` stops moving where it is (a blocked or braked joint)
+    OFFSET = "offset"  # ``joint`` settles ``offset_rad`` away from its reference (a load, a slipped belt)
+
+
+@dataclass(frozen=True)
+class TrackingFault:
+    kind: FaultKind
+    joint: int = 0  # 0-based (STUCK)
+    lag_s: float = 0.2  # (LAG)
+    offset_rad: float = 0.0  # (OFFSET)
 
 
 @dataclass
@@ -107,6 +124,8 @@ class SimController:
         self.sim_time = 0.0
         self._servo_fed: tuple[float, float] | None = None  # (sim time of the newest ServoJ, its t)
         self.servo_watchdog_trips = 0
+        self.servo_watchdog_tripped_ms: int | None = None  # the controller clock at the last trip
+        self.tracking_fault: TrackingFault | None = None  # fault injection (tests): see TrackingFault
         q = np.zeros(spec.dof) if q0 is None else np.asarray(q0, dtype=float)
         self.q_ref = q.copy()
         self.qd_ref = np.zeros(spec.dof)
@@ -188,7 +207,10 @@ class SimController:
         else:
             self.qd_ref = np.zeros(self.spec.dof)
             self.qdd_ref = np.zeros(self.spec.dof)
+        before = self.measured
         self.measured = self.engine.step(dt, self.q_ref, self.qd_ref, self.qdd_ref)
+        if self.tracking_fault is not None:
+            self.measured = _with_fault(self.tracking_fault, before, self.measured, dt)
         self._check_measured()
         self._refresh_feedback()
 
@@ -218,6 +240,7 @@ class SimController:
                 len(self.queue),
             )
             self._servo_fed = None
+            self.servo_watchdog_tripped_ms = self.clock_ms
             self.halt()
 
     def _start_next(self) -> bool:
@@ -409,3 +432,16 @@ class SimController:
             self.do_mask = (self.do_mask | bit) if on else (self.do_mask & ~bit)
         # the engine sees cabinet DOs in bits 0..31 and flange ToolDOs in bits 32..
         self.engine.set_digital_outputs(self.do_mask | (self.tool_do_mask << 32))
+
+
+def _with_fault(fault: TrackingFault, before: EngineState, now: EngineState, dt: float) -> EngineState:
+    """What the encoders read under ``fault``: the engine's state bent by it (the reference unchanged)."""
+    q = now.q.copy()
+    if fault.kind is FaultKind.LAG:
+        q = before.q + (now.q - before.q) * min(1.0, dt / max(fault.lag_s, dt))
+    elif fault.kind is FaultKind.STUCK:
+        q[fault.joint] = before.q[fault.joint]
+    elif fault.kind is FaultKind.OFFSET:
+        q[fault.joint] += fault.offset_rad
+    qd = (q - before.q) / dt if dt > 0 else np.zeros_like(q)
+    return replace(now, q=q, qd=qd)
