@@ -246,6 +246,8 @@ def create_app(
                 on_robot_status=on_robot_status,
                 on_pick_event=on_pick_event,
                 on_camera=hub.on_camera,
+                on_detections=hub.on_detections,
+                on_frame=hub.on_frame,
             )
             feeds.start()
             stack.callback(feeds.close)

@@ -35,6 +35,8 @@ class BusFeeds:
         on_robot_status: Callable[[robot_pb2.RobotStatus], None],
         on_pick_event: Callable[[task_pb2.PickEvent], None],
         on_camera: Callable[[bytes], None],
+        on_detections: Callable[[vision_pb2.DetectedObjects], None] | None = None,
+        on_frame: Callable[[bytes], None] | None = None,
     ):
         self._bus = bus
         self._keys = keys
@@ -48,6 +50,11 @@ class BusFeeds:
             (keys.pick_events, task_pb2.PickEvent, on_pick_event),
             (keys.vision_debug_image, vision_pb2.DebugImage, self._camera_handler(on_camera)),
         ]
+        if on_detections is not None:
+            self._routes.append((keys.detected_objects, vision_pb2.DetectedObjects, on_detections))
+        # camera frames stay serialised: kept as they come (on the Zenoh thread: one reference
+        # assignment), decoded only when the dashboard asks for the colour or depth view
+        self._on_frame = on_frame
 
     def _camera_handler(self, on_camera: Callable[[bytes], None]) -> Callable[[vision_pb2.DebugImage], None]:
         def handle(msg: vision_pb2.DebugImage) -> None:
@@ -61,6 +68,11 @@ class BusFeeds:
     def start(self) -> None:
         for key, msg_type, handler in self._routes:
             self._subs.append(self._bus.subscribe_callback(key, self._callback(msg_type, handler)))
+        if self._on_frame is not None:
+            on_frame = self._on_frame
+            self._subs.append(
+                self._bus.subscribe_callback(self._keys.camera_frames, lambda _k, p: on_frame(p))
+            )
 
     def _callback(
         self, msg_type: type[Message] | None, handler: Callable[[Any], None]

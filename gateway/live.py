@@ -13,8 +13,9 @@ import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
-from pickplace.v1 import common_pb2, robot_pb2, task_pb2
+from pickplace.v1 import common_pb2, robot_pb2, task_pb2, vision_pb2
 
+from gateway.camera import detections_json
 from gateway.convert import message_dict
 
 CLIENT_QUEUE = 64
@@ -33,6 +34,8 @@ def joint_state_json(msg: common_pb2.JointState) -> Message:
         "velocity": [round(v, 5) for v in msg.velocity],
         "robot_mode": msg.robot_mode,
         "tcp": [round(v, 5) for v in (p.x, p.y, p.z, p.qx, p.qy, p.qz, p.qw)],
+        "force": [round(f, 3) for f in msg.tcp_force],
+        "digital_outputs": msg.digital_outputs,
     }
 
 
@@ -60,6 +63,10 @@ class LiveHub:
         self.robot_status_at: float = 0.0
         self.camera_jpeg: bytes | None = None
         self.camera_seq = 0
+        self.detections: Message | None = None
+        self.frame_payload: bytes | None = None  # the camera's newest RGBDFrame, serialised
+        self.frame_count = 0
+        self.view_cache: tuple[tuple[str, int], bytes] | None = None  # ((view, frame_count), jpeg)
         self.sent = 0
         self.on_change: Callable[[str], None] | None = None  # every non-joint message (the status snapshot)
 
@@ -108,6 +115,15 @@ class LiveHub:
         self.camera_seq += 1
         self._broadcast({"type": "camera", "data": {"seq": self.camera_seq, "bytes": len(jpeg)}})
 
+    def on_detections(self, msg: vision_pb2.DetectedObjects) -> None:
+        self.detections = detections_json(msg)
+        self._broadcast({"type": "detections", "data": self.detections})
+
+    def on_frame(self, payload: bytes) -> None:
+        """Any thread (Zenoh's): one assignment; nothing decoded here."""
+        self.frame_payload = payload
+        self.frame_count += 1
+
     def on_event(self, kind: str, data: Message) -> None:
         """Anything else worth showing (e-stop pressed, config changed)."""
         self._broadcast({"type": kind, "data": data})
@@ -123,6 +139,8 @@ class LiveHub:
             out.append({"type": "joint_state", "data": self.joint_state})
         if self.camera_jpeg is not None:
             out.append({"type": "camera", "data": {"seq": self.camera_seq, "bytes": len(self.camera_jpeg)}})
+        if self.detections is not None:
+            out.append({"type": "detections", "data": self.detections})
         return out
 
     @contextlib.contextmanager
@@ -141,7 +159,7 @@ class LiveHub:
         return len(self._queues)
 
     def _broadcast(self, message: Message) -> None:
-        if self.on_change is not None and message["type"] != "joint_state":
+        if self.on_change is not None and message["type"] not in ("joint_state", "detections"):
             self.on_change(message["type"])
         for q in list(self._queues):
             if q.full():

@@ -7,9 +7,12 @@ import contextlib
 import json
 
 from fastapi import APIRouter, HTTPException, Response, WebSocket, WebSocketDisconnect
+from google.protobuf.message import DecodeError
 
+from gateway.camera import CameraView, frame_jpeg
 from gateway.contract import errors
 from gateway.deps import CellDep
+from services.common.errors import InvalidInputError
 from services.common.settings import CONFIG_DIR
 
 router = APIRouter(tags=["live"])
@@ -55,14 +58,32 @@ async def _drain_client(ws: WebSocket) -> None:
     response_class=Response,
     responses={
         200: {"content": {"image/jpeg": {"schema": {"type": "string", "format": "binary"}}}},
-        **errors(404),
+        **errors(404, 422),
     },
 )
-async def camera(cell: CellDep) -> Response:
-    """The vision service's latest debug image (detections drawn on it)."""
-    if cell.hub.camera_jpeg is None:
-        raise HTTPException(404, "no camera image received yet (vision service not publishing)")
-    return Response(cell.hub.camera_jpeg, media_type="image/jpeg", headers={"Cache-Control": "no-store"})
+async def camera(cell: CellDep, view: CameraView = CameraView.OVERLAY) -> Response:
+    """The camera panel's image: ``overlay`` the vision service's debug image (detections drawn on it),
+    ``color`` / ``depth`` the camera's newest frame (depth as a colour map, black where none)."""
+    hub = cell.hub
+    if view is CameraView.OVERLAY:
+        if hub.camera_jpeg is None:
+            raise HTTPException(404, "no camera image received yet (vision service not publishing)")
+        jpeg = hub.camera_jpeg
+    else:
+        payload = hub.frame_payload
+        if payload is None:
+            raise HTTPException(404, "no camera frame received yet (camera not publishing)")
+        key = (view, hub.frame_count)
+        cached = hub.view_cache
+        if cached is not None and cached[0] == key:
+            jpeg = cached[1]
+        else:
+            try:
+                jpeg = await asyncio.to_thread(frame_jpeg, payload, view)
+            except (InvalidInputError, DecodeError) as exc:
+                raise HTTPException(404, f"the newest camera frame cannot be shown: {exc}") from exc
+            hub.view_cache = (key, jpeg)
+    return Response(jpeg, media_type="image/jpeg", headers={"Cache-Control": "no-store"})
 
 
 @router.get(

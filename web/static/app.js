@@ -1,12 +1,19 @@
-// pickplace dashboard: REST for commands and history, one WebSocket for live state.
-import { COLORS, JointPlot } from "./plot.js";
+// pickplace operator's panel: REST for commands and history, one WebSocket for live state.
+// One model (state.js) holds what the cell is; render() shows it everywhere at once.
+import { describeAlarm } from "./alarms.js";
+import { COLORS, JointPlot, drawCycleTrend, drawStageBars } from "./plot.js";
 import { createRobotView } from "./robot3d.js";
+import { applyStatusAnswer, cellState, createModel, robotBadge, stateClass } from "./state.js";
 
 const API = "/api/v1";
 const PAGE = 20;
+const RECENT = 30; // picks in the cycle-time trend
+const STAGE_PICKS = 10; // picks in the stage bars
 const $ = (id) => document.getElementById(id);
+const model = createModel();
+const clock = (ms = Date.now()) => new Date(ms).toLocaleTimeString([], { hour12: false });
 
-// ---------------------------------------------------------------- token
+// ---------------------------------------------------------------- token and requests
 // `pickplace up` prints http://127.0.0.1:8080/#token=…; the fragment never reaches the server.
 function initToken() {
   const m = location.hash.match(/token=([^&]+)/);
@@ -44,34 +51,88 @@ async function api(path, { method = "GET", body } = {}) {
   return { data, res };
 }
 
-// ---------------------------------------------------------------- state display
-const STATE_CLASS = { DONE: "ok", IDLE: "ok", ESTOP: "bad", ERROR: "bad", ABORT: "bad", OFFLINE: "bad",
-                      DETECT_FAILED: "warn", RETRY: "warn", STOPPED: "warn" };
+// ---------------------------------------------------------------- events timeline
+const events = [];
+function addEvent(text, cls = "idle", at = Date.now()) {
+  events.unshift({ at, text, cls });
+  if (events.length > 200) events.pop();
+  $("events").innerHTML = events.map((e) =>
+    `<li class="${e.cls}"><time>${clock(e.at)}</time><span>${escapeHtml(e.text)}</span></li>`).join("");
+}
 
-function showState(state) {
+let lastTaskState = null, lastMode = null, lastAlarms = new Set(), lastEstop = null;
+function noteTask(t) {
+  if (!t || t.state === lastTaskState) return;
+  lastTaskState = t.state;
+  const why = t.message ? ` — ${t.message}` : "";
+  addEvent(`task ${t.state}${why}`, stateClass(t.state) === "ok" ? "idle" : stateClass(t.state));
+}
+function noteRobot(r) {
+  if (!r) return;
+  if (r.connected && r.robot_mode_name && r.robot_mode_name !== lastMode) {
+    if (lastMode !== null) addEvent(`robot mode ${lastMode} → ${r.robot_mode_name}`, stateClass(r.robot_mode_name));
+    lastMode = r.robot_mode_name;
+  }
+  if (r.estop_active !== lastEstop) {
+    if (r.estop_active) addEvent("E-STOP active on the robot", "estop");
+    else if (lastEstop) addEvent("e-stop released", "ok");
+    lastEstop = r.estop_active;
+  }
+  const now = new Set(r.alarms || []);
+  for (const id of now) if (!lastAlarms.has(id)) addEvent(`alarm ${id}: ${describeAlarm(id)}`, "bad");
+  for (const id of lastAlarms) if (!now.has(id)) addEvent(`alarm ${id} cleared`, "ok");
+  lastAlarms = now;
+}
+
+// ---------------------------------------------------------------- render: one source of truth
+function render() {
+  const now = performance.now();
+  const state = cellState(model, now);
+  const cls = stateClass(state);
   $("state").textContent = state;
-  $("state-dot").className = "dot " + (STATE_CLASS[state] || "ok");
+  $("state").className = cls;
+  $("state-dot").className = `dot ${cls}`;
+  const t = model.task;
+  const fresh = t && now - model.taskAt <= 5000;
+  $("cycle-progress").value = fresh ? t.progress || 0 : 0;
+  $("cycle-text").textContent = fresh ? `#${t.cycle_index || 0} ${t.state}` : "task service not reporting";
+  $("stat-task").textContent = fresh ? `${t.task || "—"} ${t.running ? "running" : "idle"} (${t.state})` : "offline";
+  const b = robotBadge(model.robot);
+  $("robot-mode").textContent = b.text;
+  $("robot-mode").className = `badge ${b.cls}`;
+  const g = $("gripper");
+  if (model.robot && model.robot.connected && model.robot.gripper_closed != null) {
+    g.textContent = model.robot.gripper_closed ? "closed" : "open";
+    g.className = model.robot.gripper_closed ? "closed" : "open";
+  }
+  const st = model.status;
+  if (st) {
+    $("stat-uptime").textContent = fmtDuration(st.uptime);
+    $("stat-db").textContent = st.database + (st.pick_buffer ? ` (${st.pick_buffer} buffered)` : "");
+  }
 }
 
-let lastStatus = null;
-function applyStatus(st) {
-  lastStatus = st;
-  showState(st.state);
-  const t = st.task;
-  $("cycle-progress").value = t ? t.progress : 0;
-  $("cycle-text").textContent = t ? `#${t.cycle_index} ${t.state}` : "task service offline";
-  $("stat-task").textContent = t ? `${t.task || "—"} ${t.running ? "running" : "idle"}` : "offline";
-  $("stat-uptime").textContent = fmtDuration(st.uptime);
-  $("stat-db").textContent = st.database + (st.pick_buffer ? ` (${st.pick_buffer} buffered)` : "");
-  applyRobot(st.robot);
-}
-
-function applyRobot(r) {
-  const b = $("robot-mode");
-  if (!r || !r.connected) { b.textContent = "offline"; b.className = "badge bad"; return; }
-  if (r.estop_active) { b.textContent = "E-STOP"; b.className = "badge bad"; }
-  else { b.textContent = r.robot_mode_name || String(r.robot_mode); b.className = "badge " + (r.enabled ? "ok" : "warn"); }
-  if (r.estop_active) showState("ESTOP");
+// The live link: greyed out with "stale since" while neither the WebSocket nor the status answers.
+function setLink(kind, up) {
+  if (kind === "live") model.liveUp = up; else model.statusUp = up;
+  const ok = model.liveUp && model.statusUp;
+  if (ok) model.everUp = true;
+  $("ws-state").textContent = `live: ${model.liveUp ? "connected" : "reconnecting…"}`;
+  if (!ok && model.everUp && model.staleSince == null) {
+    model.staleSince = Date.now();
+    addEvent("live link to the gateway lost", "bad");
+  } else if (ok && model.staleSince != null) {
+    addEvent(`live link back (stale ${Math.round((Date.now() - model.staleSince) / 1000)} s)`, "ok");
+    model.staleSince = null;
+  }
+  document.body.classList.toggle("stale", model.staleSince != null);
+  document.body.dataset.stale = String(model.staleSince != null);
+  const banner = $("stale");
+  banner.hidden = model.staleSince == null;
+  if (model.staleSince != null) {
+    banner.textContent = `stale since ${clock(model.staleSince)}: no answer from the gateway; what is shown is ` +
+      "the last known state (reconnecting by itself)";
+  }
 }
 
 function fmtDuration(s) {
@@ -81,12 +142,22 @@ function fmtDuration(s) {
 }
 const pct = (x) => (x == null ? "—" : `${(100 * x).toFixed(1)} %`);
 const secs = (x) => (x == null ? "—" : `${x.toFixed(2)} s`);
+function escapeHtml(s) {
+  return String(s).replace(/[&<>"']/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;" })[c]);
+}
 
-// ---------------------------------------------------------------- joints
+// ---------------------------------------------------------------- joints, TCP, force
 const plot = new JointPlot($("joint-plot"));
 let robotView = null;
+function rpyDeg([qx, qy, qz, qw]) {
+  const r = Math.atan2(2 * (qw * qx + qy * qz), 1 - 2 * (qx * qx + qy * qy));
+  const p = Math.asin(Math.max(-1, Math.min(1, 2 * (qw * qy - qz * qx))));
+  const y = Math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz));
+  return [r, p, y].map((a) => ((a * 180) / Math.PI).toFixed(1));
+}
 function applyJoints(js) {
-  plot.push(js.stamp_ns, js.position);
+  model.joint = js;
+  plot.push(js.source_stamp_ns || js.stamp_ns, js.position);
   if (robotView) robotView.setJoints(js.name, js.position);
   const rows = $("joint-rows");
   if (rows.children.length !== js.name.length) {
@@ -99,9 +170,45 @@ function applyJoints(js) {
     tds[1].textContent = ((q * 180) / Math.PI).toFixed(2);
     tds[2].textContent = js.velocity.length ? ((js.velocity[i] * 180) / Math.PI).toFixed(1) : "";
   });
+  if (js.tcp && js.tcp.length === 7) {
+    $("tcp-pos").textContent = js.tcp.slice(0, 3).map((v) => (v * 1000).toFixed(1)).join("  ");
+    $("tcp-rot").textContent = rpyDeg(js.tcp.slice(3)).join("  ");
+  }
+  if (js.force && js.force.length >= 3) {
+    const [fx, fy, fz] = js.force;
+    $("force").textContent = Math.hypot(fx, fy, fz).toFixed(1);
+    $("force-xyz").textContent = [fx, fy, fz].map((f) => f.toFixed(1)).join("  ");
+  }
 }
 
-// ---------------------------------------------------------------- history + stats
+// ---------------------------------------------------------------- camera and detections
+let camView = "overlay", camSeq = 0, camPending = false;
+function refreshCamera() {
+  if (camPending) return;
+  camPending = true;
+  const img = $("camera-img");
+  img.onload = () => { camPending = false; img.hidden = false; $("camera-none").hidden = true; img.dataset.view = camView; };
+  img.onerror = () => { camPending = false; img.hidden = true; $("camera-none").hidden = false;
+    $("camera-none").textContent = `no ${camView} image yet`; };
+  img.src = `${API}/camera/latest.jpg?view=${camView}&seq=${camSeq}`;
+}
+function applyDetections(d) {
+  model.detections = d;
+  const mm = (v) => (v ? v.map((x) => (x * 1000).toFixed(0)).join(" ") : "not calibrated");
+  const rows = d.objects.map((o) => {
+    const conf = o.kind === "rod" ? `${(100 * o.confidence).toFixed(0)} %`
+      : o.kind === "cube" ? `fit ${o.fit_rms_mm.toFixed(1)} mm${o.visibility !== "whole" ? `, ${o.visibility}` : ""}`
+        : (o.recognised ? "recognised" : "unknown object");
+    const at = o.kind === "obstacle" && o.base ? `${mm(o.base[0])} → ${mm(o.base[1])}` : mm(o.base);
+    return `<tr class="${o.kind}"><td>${o.kind}</td><td>${escapeHtml(o.color || "—")}</td>` +
+      `<td class="conf">${conf}</td><td>${at}</td></tr>`;
+  });
+  $("det-rows").innerHTML = rows.join("") || `<tr><td colspan="4" class="muted">nothing detected</td></tr>`;
+  $("det-info").textContent = `frame ${d.seq} · ${d.total_ms} ms`;
+  $("det-notes").textContent = d.notes.join(" · ");
+}
+
+// ---------------------------------------------------------------- history, stats, trend, stages
 let page = 0, total = 0;
 async function loadHistory(highlight = new Set()) {
   try {
@@ -109,10 +216,10 @@ async function loadHistory(highlight = new Set()) {
     total = Number(res.headers.get("X-Total-Count") || data.length);
     $("history-rows").innerHTML = data.map((p) => {
       const cls = (p.success ? "ok" : "fail") + (highlight.has(p.pick_id) ? " new" : "");
-      const t = new Date(p.timestamp).toLocaleTimeString();
-      const res = p.success ? "success" : (p.error_code || "failed");
+      const t = new Date(p.timestamp).toLocaleTimeString([], { hour12: false });
+      const r = p.success ? "success" : (p.error_code || "failed");
       return `<tr class="${cls}" title="${escapeHtml(p.error_message || "")}"><td>${p.id}</td><td>${t}</td>` +
-             `<td>${escapeHtml(p.object_class || "—")}</td><td>${escapeHtml(res)}</td>` +
+             `<td>${escapeHtml(p.object_class || "—")}</td><td>${escapeHtml(r)}</td>` +
              `<td>${p.cycle_time == null ? "—" : p.cycle_time.toFixed(2)}</td><td>${escapeHtml(p.stage_reached || "")}</td></tr>`;
     }).join("") || `<tr><td colspan="6" class="muted">no picks yet</td></tr>`;
     const pages = Math.max(1, Math.ceil(total / PAGE));
@@ -124,6 +231,15 @@ async function loadHistory(highlight = new Set()) {
   }
 }
 
+async function loadRecent() {
+  try {
+    const { data } = await api(`/picks?limit=${RECENT}`);
+    $("trend").dataset.points = drawCycleTrend($("trend"), data);
+    const details = await Promise.all(data.slice(0, STAGE_PICKS).map((p) => api(`/picks/${p.id}`).then((r) => r.data)));
+    $("stages").dataset.bars = drawStageBars($("stages"), details);
+  } catch { /* the history line says why */ }
+}
+
 async function loadStats() {
   try {
     const { data } = await api("/metrics");
@@ -133,71 +249,46 @@ async function loadStats() {
     $("stat-avg").textContent = secs(data.avg_cycle_time);
     $("stat-pct").textContent = data.cycle_time_p50 == null ? "—" :
       `${data.cycle_time_p50.toFixed(1)} / ${data.cycle_time_p95.toFixed(1)} s`;
-  } catch (err) { /* the status line shows the database state */ }
+  } catch { /* the status line shows the database state */ }
 }
 
-// A status answer must not undo a newer live message (the e-stop's robot_status can overtake it).
-let liveRobotAt = 0;
 async function loadStatus() {
   const asked = performance.now();
   try {
     const st = (await api("/system/status")).data;
-    if (asked < liveRobotAt && lastStatus) st.robot = lastStatus.robot;
-    applyStatus(st);
-  } catch (err) { showState("OFFLINE"); }
-}
-
-function escapeHtml(s) {
-  return String(s).replace(/[&<>"']/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;" })[c]);
-}
-
-// ---------------------------------------------------------------- camera
-let cameraPending = false, cameraSeq = 0;
-function refreshCamera(seq) {
-  cameraSeq = seq;
-  if (cameraPending) return;
-  cameraPending = true;
-  const img = $("camera-img");
-  img.onload = img.onerror = () => {
-    cameraPending = false;
-    img.hidden = false; $("camera-none").hidden = true;
-  };
-  img.src = `${API}/camera/latest.jpg?seq=${cameraSeq}`;
+    applyStatusAnswer(model, st, asked, performance.now());
+    noteRobot(model.robot); noteTask(model.task);
+    setLink("status", true);
+  } catch { setLink("status", false); }
+  render();
 }
 
 // ---------------------------------------------------------------- live
 function connectLive() {
   const ws = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}${API}/live`);
-  ws.onopen = () => { $("ws-state").textContent = "live: connected"; };
-  ws.onclose = () => {
-    $("ws-state").textContent = "live: reconnecting…";
-    setTimeout(connectLive, 1500);
-  };
+  ws.onopen = () => { setLink("live", true); render(); };
+  ws.onclose = () => { setLink("live", false); render(); setTimeout(connectLive, 1500); };
   ws.onmessage = (ev) => {
     const msg = JSON.parse(ev.data);
     switch (msg.type) {
-      case "joint_state": applyJoints(msg.data); break;
-      case "robot_status":
-        liveRobotAt = performance.now();
-        if (lastStatus) lastStatus.robot = msg.data;
-        applyRobot(msg.data);
-        if (!msg.data.estop_active && lastStatus && lastStatus.task) showState(lastStatus.task.state);
-        break;
-      case "task_status":
-        if (lastStatus) { lastStatus.task = msg.data; }
-        if (!lastStatus || !lastStatus.robot || !lastStatus.robot.estop_active) showState(msg.data.state);
-        $("cycle-progress").value = msg.data.progress || 0;
-        $("cycle-text").textContent = `#${msg.data.cycle_index || 0} ${msg.data.state}`;
-        break;
+      case "joint_state": applyJoints(msg.data); return;
+      case "robot_status": model.robot = msg.data; model.robotAt = performance.now(); noteRobot(msg.data); break;
+      case "task_status": model.task = msg.data; model.taskAt = performance.now(); noteTask(msg.data); break;
       case "picks":
         page = 0;
-        loadHistory(new Set(msg.data.map((p) => p.pick_id)));
-        loadStats();
+        for (const p of msg.data) {
+          if (!p.success) addEvent(`pick #${p.id} failed at ${p.stage_reached}: ${p.error_message || p.error_code || "?"}`, "bad");
+        }
+        loadHistory(new Set(msg.data.map((p) => p.pick_id))); loadStats(); loadRecent();
         break;
-      case "camera": refreshCamera(msg.data.seq); break;
-      case "estop": showState("ESTOP"); notice(`E-stop: ${msg.data.message}`); break;
-      default: break;
+      case "camera": camSeq = msg.data.seq; refreshCamera(); return;
+      case "detections": applyDetections(msg.data); return;
+      case "estop": addEvent(`E-STOP pressed: ${msg.data.message}`, "estop"); notice(`E-stop: ${msg.data.message}`); break;
+      case "estop_task": addEvent(`e-stop: ${msg.data.message}`, "warn"); break;
+      case "config": if (msg.data.updated && msg.data.updated.length) addEvent(`settings changed: ${msg.data.updated.join(", ")}`, "idle"); loadConfig(); break;
+      default: return;
     }
+    render();
   };
 }
 
@@ -207,11 +298,21 @@ async function command(path, body, okText) {
   try {
     const { data } = await api(path, { method: "POST", body });
     notice(okText || data.message, "info");
-    loadStatus();
+    addEvent(okText || data.message, "idle");
   } catch (err) {
     if (err.status === 401) { notice(`${err.message} — set the token`); $("token-dialog").showModal(); }
-    else notice(err.message);
+    else { notice(err.message); addEvent(`refused: ${err.message}`, "warn"); }
   }
+  loadStatus();
+}
+
+async function loadConfig() {
+  try {
+    const { data } = await api("/config");
+    $("cell-id").textContent = `· ${data.cell_id} · ${data.robot.model}`;
+    $("speed-range").value = data.robot.speed_ratio;
+    $("speed-value").textContent = `${data.robot.speed_ratio} %`;
+  } catch { /* shown by status */ }
 }
 
 function bindControls() {
@@ -225,19 +326,32 @@ function bindControls() {
   });
   $("page-prev").onclick = () => { if (page > 0) { page--; loadHistory(); } };
   $("page-next").onclick = () => { page++; loadHistory(); };
+  $("camera").onclick = () => $("camera").classList.toggle("enlarged");
+  for (const r of document.querySelectorAll('input[name="camview"]')) {
+    r.onchange = () => { camView = r.value; camPending = false; refreshCamera(); };
+  }
+  $("speed-range").oninput = () => { $("speed-value").textContent = `${$("speed-range").value} %`; };
+  $("speed-form").onsubmit = async (ev) => {
+    ev.preventDefault();
+    const v = Number($("speed-range").value);
+    try {
+      const { data } = await api("/config", { method: "PUT", body: { robot: { speed_ratio: v } } });
+      notice(data.updated.length ? `speed ratio ${v} % applied` : `speed ratio already ${v} %`, "info");
+    } catch (err) { notice(err.message); }
+    loadConfig();
+  };
 }
 
 async function main() {
   initToken();
   bindControls();
-  try {
-    const { data } = await api("/config");
-    $("cell-id").textContent = `· ${data.cell_id} · ${data.robot.model}`;
-  } catch { /* shown by status */ }
+  loadConfig();
   connectLive();
-  loadStatus(); loadHistory(); loadStats();
-  setInterval(loadStatus, 2000);
+  loadStatus(); loadHistory(); loadStats(); loadRecent();
+  setInterval(loadStatus, 1000);
   setInterval(loadStats, 5000);
+  setInterval(render, 1000); // a task that stops reporting goes stale even without new messages
+  setInterval(() => { if (camView !== "overlay") { camSeq++; refreshCamera(); } }, 1000);
   robotView = await createRobotView($("robot3d"), `${API}/robot/urdf`);
 }
 

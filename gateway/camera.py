@@ -1,0 +1,93 @@
+"""The camera panel's images: the vision overlay as published, or the camera's newest frame as colour
+or as a false-colour depth map, encoded on demand (at the rate the dashboard asks, not the camera's)."""
+
+from __future__ import annotations
+
+from enum import StrEnum
+
+import cv2
+import numpy as np
+from pickplace.v1 import vision_pb2
+
+from services.common.errors import InvalidInputError
+
+DEPTH_RANGE_M = (0.2, 2.0)  # the colour map's span: near table top to the floor behind it
+JPEG_QUALITY = 85
+
+
+class CameraView(StrEnum):
+    OVERLAY = "overlay"  # vision's debug image: detections drawn on the colour frame
+    COLOR = "color"
+    DEPTH = "depth"
+
+
+def frame_jpeg(payload: bytes, view: CameraView) -> bytes:
+    """JPEG of one serialised RGBDFrame, as colour or as depth (turbo colour map, black = no depth)."""
+    frame = vision_pb2.RGBDFrame.FromString(payload)
+    w, h = frame.intrinsics.width, frame.intrinsics.height
+    if w <= 0 or h <= 0:
+        raise InvalidInputError(f"camera frame without a size ({w}x{h})")
+    if view is CameraView.COLOR:
+        if len(frame.color_rgb8) != w * h * 3:
+            raise InvalidInputError(f"colour image of {len(frame.color_rgb8)} bytes for {w}x{h}")
+        img = cv2.cvtColor(np.frombuffer(frame.color_rgb8, np.uint8).reshape(h, w, 3), cv2.COLOR_RGB2BGR)
+    else:
+        if len(frame.depth_u16) != w * h * 2:
+            raise InvalidInputError(f"depth image of {len(frame.depth_u16)} bytes for {w}x{h}")
+        z = np.frombuffer(frame.depth_u16, "<u2").reshape(h, w).astype(np.float32) * (
+            frame.depth_scale or 1e-3
+        )
+        lo, hi = DEPTH_RANGE_M
+        scaled = np.clip((z - lo) / (hi - lo), 0, 1)
+        img = cv2.applyColorMap((255 * (1 - scaled)).astype(np.uint8), cv2.COLORMAP_TURBO)
+        img[z <= 0] = 0
+    ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+    if not ok:
+        raise InvalidInputError("camera frame could not be encoded")
+    return bytes(buf.tobytes())
+
+
+def detections_json(msg: vision_pb2.DetectedObjects) -> dict[str, object]:
+    """What the dashboard lists: each object with its kind, colour, confidence or fit, base-frame place."""
+
+    def vec(v: vision_pb2.Vec3) -> list[float]:
+        return [round(v.x, 4), round(v.y, 4), round(v.z, 4)]
+
+    rods = [
+        {
+            "kind": "rod",
+            "confidence": round(r.confidence, 3),
+            "length_m": round(r.length_m, 4),
+            "method": r.method,
+            "base": vec(r.center_base) if r.has_base else None,
+        }
+        for r in msg.rods
+    ]
+    cubes = [
+        {
+            "kind": "cube",
+            "color": c.color_label,
+            "visibility": vision_pb2.Visibility.Name(c.visibility).removeprefix("VISIBILITY_").lower(),
+            "hidden_fraction": round(c.hidden_fraction, 3),
+            "fit_rms_mm": round(c.fit_rms_m * 1e3, 2),
+            "base": vec(c.centroid_base) if c.has_base else None,
+        }
+        for c in msg.cubes
+    ]
+    boxes = [
+        {
+            "kind": "obstacle",
+            "color": b.color_label,
+            "recognised": b.recognised,
+            "base": [vec(b.base.min), vec(b.base.max)] if b.has_base else None,
+        }
+        for b in msg.obstacles
+    ]
+    return {
+        "seq": msg.header.seq,
+        "stamp_ns": msg.header.stamp_ns,
+        "objects": rods + cubes + boxes,
+        "notes": list(msg.notes),
+        "total_ms": round(msg.timings_ms.get("total", 0.0), 1),
+        "calibrated": msg.calibrated,
+    }
