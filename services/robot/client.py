@@ -53,6 +53,7 @@ from services.common.errors import (
 from services.common.frames import dobot_pose_to_transform, finite_vector, transform_to_dobot_pose
 from services.common.settings import ReconnectSettings
 from services.dobot import RobotMode
+from services.robot.priority_lane import PriorityLane
 
 log = logging.getLogger("pickplace.robot.client")
 
@@ -250,6 +251,8 @@ class DobotClient:
         self._rx_task: asyncio.Task[None] | None = None
         self._fb_task: asyncio.Task[None] | None = None
         self._stop_task: asyncio.Task[None] | None = None
+        # the e-stop's own connection (services.robot.priority_lane): never behind other requests
+        self.estop_lane = PriorityLane(host, dashboard_port, connect_timeout_s, request_timeout_s)
         self._pending: list[_Pending] = []
         self._connect_lock = asyncio.Lock()
         self._feedback: FeedbackState | None = None
@@ -283,6 +286,7 @@ class DobotClient:
         if self.state is ClientState.CLOSED:
             raise RuntimeError("client is closed")
         await self._ensure_dashboard()
+        await self.estop_lane.open()
         if self._fb_task is None or self._fb_task.done():
             self._fb_task = asyncio.create_task(self._feedback_loop(), name=f"dobot-feedback-{self.host}")
         if self.link is not LinkState.UP:
@@ -308,6 +312,7 @@ class DobotClient:
                 with contextlib.suppress(asyncio.CancelledError, Exception):
                     await task
         self._rx_task = self._fb_task = self._stop_task = None
+        await self.estop_lane.close()
         self._drop_dashboard(RobotCommunicationError("client closed"))
         self._fail_waiters(RobotCommunicationError("client closed"))
 
@@ -756,8 +761,15 @@ class DobotClient:
         await self.request("Stop()")
 
     async def emergency_stop(self, press: bool = True) -> None:
-        # e-stop must never be refused by our own checks: raw send, then inspect
-        reply = await self.raw_request(dobot.emergency_stop(press))
+        """Press (or release) the controller's e-stop on the e-stop's own connection, never queued
+        behind other requests; the main connection only when that lane cannot reach the controller.
+        Never refused by our own checks: sent raw, then the reply inspected."""
+        command = dobot.emergency_stop(press)
+        try:
+            reply = await self.estop_lane.request(command)
+        except RobotCommunicationError as exc:
+            log.warning("%s; sending the e-stop on the main dashboard connection", exc)
+            reply = await self.raw_request(command)
         if reply.error_id != 0:
             raise ControllerError(
                 f"EmergencyStop refused with ErrorID {reply.error_id}", error_id=reply.error_id

@@ -282,6 +282,8 @@ class RobotDriver:
             except ControllerError as exc:
                 last = exc
                 if self._abort.is_set():
+                    if self._abort_by_estop:  # the e-stop's alarm: the operator's path, not a retry
+                        raise EmergencyStopError(f"emergency stop during {what}: {exc}") from exc
                     break
                 log.warning("%s failed (attempt %d/%d): %s", what, attempt + 1, retries + 1, exc)
                 if attempt < retries:

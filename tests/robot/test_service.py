@@ -114,7 +114,10 @@ async def test_estop_over_grpc_during_move(stub, service):
     assert r.success
     with pytest.raises(grpc.aio.AioRpcError) as err:
         await move
-    assert "EmergencyStopError" in err.value.details() or "TrajectoryExecutionError" in err.value.details()
+    # labelled end to end: the task's wait-for-operator path, never a retried execution failure
+    assert err.value.code() == grpc.StatusCode.FAILED_PRECONDITION
+    assert dict(err.value.trailing_metadata() or ())["pickplace-error-type"] == "EmergencyStopError"
+    assert service.driver.client.estop_lane.requests == 1  # on the e-stop's own connection
     st = await stub.GetStatus(robot_pb2.GetStatusRequest())
     assert st.estop_active and not st.enabled and 116 in st.alarms
 
