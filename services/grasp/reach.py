@@ -141,15 +141,18 @@ def track_paths(
         min_margin = np.minimum(min_margin, singularity_margin(spec, nxt))
         prev = nxt
 
-    # table clearance of the elbow and wrist joints (frames 3..6) along each surviving track
-    z = frame_origins(spec, path)[..., 2:, 2]  # (B, 8, N, 4)
-    low = z.min(axis=(-1, -2))
+    # table clearance of the elbow and wrist joints (frames 3..6) along each surviving track (only
+    # those: forward kinematics of every dead track was most of the planning time)
+    low = np.full((B, 8), np.inf)
+    live = np.nonzero(alive)
+    if live[0].size:
+        low[live] = frame_origins(spec, path[live])[..., 2:, 2].min(axis=(-1, -2))  # (M, N, 4) → (M,)
     near_table = low < limits.table_z_m + limits.arm_table_clearance_m
     singular = min_margin < limits.min_singularity_sin
     for b in range(B):
         if alive[b].any() and not (alive[b] & ~near_table[b] & ~singular[b]).any():
             fail_at[b] = N - 1
-            if (alive[b] & near_table[b]).all():
+            if near_table[b][alive[b]].all():
                 reason[b] = (
                     f"every IK branch brings the elbow or wrist within {limits.arm_table_clearance_m:.2f} m "
                     f"of the table (lowest {np.max(np.where(alive[b], low[b], -BIG)):.3f} m)"
