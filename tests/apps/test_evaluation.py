@@ -22,7 +22,8 @@ pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
 async def test_eval_two_trials_reports_ground_truth_on_the_controller_clock(tmp_path):
     s = cell_settings(tmp_path, sim={"speed": 3.0})
-    report = await run_eval(s, trials=2, seed=10, progress=False)
+    # the nominal world: these seeds stand there (randomized worlds: test_evaluation_randomized.py)
+    report = await run_eval(s, trials=2, seed=10, progress=False, randomize=False)
     assert len(report.results) == 2 and [r.seed for r in report.results] == [10, 11]
     for r in report.results:
         # success is the twin's verdict; a failure always says where and why
