@@ -38,6 +38,7 @@ from foxglove.websocket import ChannelView, Client, ServerListener
 from pickplace.v1 import common_pb2, robot_pb2, vision_pb2
 
 from services.common.bus import Bus
+from services.common.errors import ConfigurationError
 from services.common.keys import CellKeys
 from services.common.sensors import RGBDFrame, msg_to_frame
 from services.common.settings import Settings
@@ -180,14 +181,20 @@ class RecordService(ServiceShell):
         if self.live:
             self._live_context = ctx = foxglove.Context()  # held: a dropped context closes its channels
             self._live_channels = open_channels(ctx)
-            self.server = foxglove.start_server(
-                name=f"pickplace {self.settings.cell_id}",
-                host=fs.host,
-                port=fs.port,
-                context=ctx,
-                server_listener=_Listener(self._on_subscribe),
-                asset_handler=self._asset,
-            )
+            try:
+                self.server = foxglove.start_server(
+                    name=f"pickplace {self.settings.cell_id}",
+                    host=fs.host,
+                    port=fs.port,
+                    context=ctx,
+                    server_listener=_Listener(self._on_subscribe),
+                    asset_handler=self._asset,
+                )
+            except RuntimeError as exc:  # the SDK's FoxgloveError, e.g. the port is taken
+                raise ConfigurationError(
+                    f"cannot serve the Foxglove live view on {fs.host}:{fs.port}: {exc} "
+                    "(--foxglove-port N picks another port, --no-foxglove turns it off)"
+                ) from exc
             self.port = self.server.port
             stack.callback(self.server.stop)
             log.info("Foxglove live view on ws://%s:%d", fs.host, self.port)

@@ -110,3 +110,21 @@ async def test_serve_record_takes_the_cell_from_the_bus(tmp_path: Path) -> None:
     # the recorder has every state the live client saw (and the first ones, before the client's subscription)
     assert seq >= counts[Topic.JOINT_STATES] >= client.count(Topic.JOINT_STATES) >= 51
     assert counts[Topic.CAMERA_COLOR] == 1 and counts[Topic.DETECTIONS] == 1
+
+
+async def test_a_taken_foxglove_port_is_a_configuration_error_naming_it(tmp_path: Path) -> None:
+    import socket
+
+    from services.common.errors import ConfigurationError
+    from services.record.service import RecordService
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        s = load_settings(
+            "sim", overrides={"logging": {"file": None}, "record": {"foxglove": {"port": port}}}
+        )
+        with pytest.raises(ConfigurationError, match=f"127.0.0.1:{port}.*--foxglove-port"):
+            async with RecordService(s, None):
+                pass

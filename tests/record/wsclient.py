@@ -54,7 +54,7 @@ class FoxgloveClient:
                 self.received.setdefault(self._subs[sub_id], []).append((log_time, bytes(frame[13:])))
                 self._message.set()
 
-    async def wait_for_channels(self, topics: set[str], timeout_s: float = 10.0) -> None:
+    async def wait_for_channels(self, topics: set[str], timeout_s: float = 30.0) -> None:
         async with asyncio.timeout(timeout_s):
             while not topics <= set(self.channels):
                 self._advertised.clear()
@@ -71,7 +71,7 @@ class FoxgloveClient:
     def count(self, topic: str) -> int:
         return len(self.received.get(topic, []))
 
-    async def wait_until(self, done: Callable[[], bool], timeout_s: float = 10.0) -> None:
+    async def wait_until(self, done: Callable[[], bool], timeout_s: float = 30.0) -> None:
         """Until ``done()`` holds, checked on every message that arrives."""
         async with asyncio.timeout(timeout_s):
             while not done():
