@@ -24,6 +24,7 @@ from services.common.keys import CellKeys
 from services.common.live_config import LiveConfig
 from services.common.messages import pose_to_matrix
 from services.common.settings import Settings
+from services.common.settings.robot import RobotDriverKind
 from services.common.shell import GrpcShell
 from services.kinematics.robot_models import get_robot
 from services.kinematics.tool import tool_frame
@@ -33,6 +34,7 @@ from services.robot.driver import RobotDriver
 from services.robot.link import ControllerLink
 from services.robot.messages import joint_state_msg, robot_status_msg
 from services.robot.safety import cap_ratio, speed_ratio_field
+from services.robot.ur.link import URLink
 
 log = logging.getLogger("pickplace.robot.service")
 
@@ -245,6 +247,16 @@ def force_drop_condition(
 
 def build_driver(settings: Settings) -> RobotDriver:
     r = settings.robot
+    client: ControllerLink
+    if r.driver is RobotDriverKind.UR_RTDE:
+        client = URLink(
+            r.host,
+            get_robot(r.model),
+            request_timeout_s=r.request_timeout_s,
+            feedback_timeout_s=r.feedback_timeout_s,
+            reconnect=r.reconnect,
+        )
+        return RobotDriver(client, get_robot(r.model), settings, tool_frame(settings))
     client = DobotClient(
         r.host,
         r.dashboard_port,

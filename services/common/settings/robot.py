@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from enum import StrEnum
 from typing import Literal
 
 from pydantic import Field, field_validator, model_validator
@@ -28,8 +29,16 @@ class WorkspaceBounds(Model):
         return self
 
 
+class RobotDriverKind(StrEnum):
+    """The protocol the driver speaks to the controller."""
+
+    DOBOT = "dobot"  # Dobot V4 TCP/IP (dashboard 29999, feedback 30004)
+    UR_RTDE = "ur_rtde"  # a Universal Robots controller through SDU's ur_rtde (RTDE 30004, 500 Hz)
+
+
 class RobotSettings(Model):
     model: Literal["nova5", "ur5e", "ur3"] = "nova5"
+    driver: RobotDriverKind = RobotDriverKind.DOBOT
     host: str = "127.0.0.1"
     dashboard_port: int = Field(29999, ge=1, le=65535)
     feedback_port: int = Field(30004, ge=1, le=65535)
@@ -65,6 +74,12 @@ class RobotSettings(Model):
         if not 1 <= v <= 100:
             raise ValueError(f"speed_ratio must be within 1-100 percent, got {v}")
         return v
+
+    @model_validator(mode="after")
+    def _driver_fits_model(self) -> RobotSettings:
+        if self.driver is RobotDriverKind.UR_RTDE and self.model not in ("ur5e", "ur3"):
+            raise ValueError(f"robot.driver ur_rtde drives a UR (ur5e, ur3), not robot.model {self.model!r}")
+        return self
 
     @model_validator(mode="after")
     def _remote(self) -> RobotSettings:

@@ -136,7 +136,7 @@ class URController:
         if self.safety_mode is not SafetyMode.PROTECTIVE_STOP:
             return None
         assert self.protective_stop_at is not None
-        if self.timestamp_s - self.protective_stop_at < self.config.unlock_delay_s:
+        if self.timestamp_s - self.protective_stop_at < self.config.unlock_delay_s - 1e-9:
             return (
                 f"Cannot unlock protective stop until {self.config.unlock_delay_s:g}s after occurrence. "
                 "Always inspect cause of protective stop before unlocking"

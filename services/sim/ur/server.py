@@ -156,6 +156,7 @@ class _RTDESession:
                 words.append(t.value)
                 ok_types.append(t)
         if not names or len(ok_types) != len(names):
+            log.warning("input recipe %s refused: %s", ",".join(names), ",".join(words))
             return codec.setup_reply(MessageType.CONTROL_PACKAGE_SETUP_INPUTS, 0, words)
         rid = len(self.inputs) + 1
         self.inputs[rid] = Recipe(rid, names, tuple(ok_types))
