@@ -177,6 +177,7 @@ class RecordService(ServiceShell):
                 metadata={"cell_id": self.settings.cell_id, "robot_model": self.spec.name},
                 opener=self.opener,
                 on_stopped=self._recording_stopped,
+                latched={Topic.ROBOT_DESCRIPTION: convert.robot_description(self.urdf)},
             )
         if self.live:
             self._live_context = ctx = foxglove.Context()  # held: a dropped context closes its channels
@@ -374,19 +375,9 @@ class RecordService(ServiceShell):
             stamp, levelno, name, msg, path, line = item.payload
             self._emit(Topic.LOG, convert.log_message(stamp, levelno, name, msg, path, line), t)
         elif k is Kind.RESEND:
-            self._emit(
-                Topic.ROBOT_DESCRIPTION, convert.robot_description(self.urdf), t, record=self._first_resend()
-            )
+            self._emit(Topic.ROBOT_DESCRIPTION, convert.robot_description(self.urdf), t, record=False)
             if self._calibration is not None:
                 self._emit(Topic.CAMERA_CALIBRATION, self._calibration, t, record=False)
-
-    _description_recorded = False
-
-    def _first_resend(self) -> bool:
-        """The description goes into a recording once per file set (it is also an attachment of every file)."""
-        first = not self._description_recorded
-        self._description_recorded = True
-        return first
 
     def _joints(self, payload: bytes, t: int) -> None:
         self._emit(Topic.JOINT_STATES, payload, t)

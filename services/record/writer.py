@@ -128,8 +128,8 @@ def write_options(s: RecordSettings) -> MCAPWriteOptions:
 class Recorder:
     """MCAP files ``<prefix>_<UTC start>_<index>.mcap`` under ``directory``.
 
-    ``attachments`` (name → (media type, bytes)) and ``metadata`` go into every file, so each file
-    stands alone (the URDF, the settings the cell ran with).
+    ``attachments`` (name → (media type, bytes)), ``metadata`` and the ``latched`` messages (the robot
+    description) go into every file, so each file stands alone.
     """
 
     def __init__(
@@ -142,6 +142,7 @@ class Recorder:
         clock_ns: Callable[[], int] = time.time_ns,
         opener: Opener = open_new,
         on_stopped: Callable[[RecordingStopped], None] | None = None,
+        latched: dict[Topic, bytes] | None = None,
     ):
         self.settings = settings
         self.directory = Path(directory)
@@ -151,6 +152,7 @@ class Recorder:
         self.clock_ns = clock_ns
         self.opener = opener
         self.on_stopped = on_stopped
+        self.latched = dict(latched or {})
         self.state = RecorderState.RECORDING
         self.stopped: RecordingStopped | None = None
         self.files: list[FileSummary] = []
@@ -193,6 +195,8 @@ class Recorder:
             self._fail(path, self._reason(exc))
             return
         log.info("recording to %s", path)
+        for topic, payload in self.latched.items():
+            self._log(topic, payload, now)
 
     def _reason(self, exc: BaseException | None) -> str:
         err = self._file.error if self._file is not None else None
@@ -242,18 +246,25 @@ class Recorder:
             self.clock_ns() - self._current.opened_ns >= self.settings.max_file_s * 1e9
         ):
             self._roll()
+        if self._log(topic, payload, log_time_ns):
+            f = self._file
+            assert f is not None
+            if f.bytes_written >= self.settings.max_file_bytes:
+                self._roll()
+
+    def _log(self, topic: Topic, payload: bytes, log_time_ns: int) -> bool:
+        """Log into the current file; False when nothing is being recorded (any more)."""
         if self.state is not RecorderState.RECORDING or self._writer is None:
-            return
+            return False
         self._channels[topic].log(payload, log_time=log_time_ns)
         f, cur = self._file, self._current
         assert f is not None and cur is not None
         if f.error is not None:
             self._fail(f.path, self._reason(None))
-            return
+            return False
         cur.messages += 1
         cur.per_topic[topic] = cur.per_topic.get(topic, 0) + 1
-        if f.bytes_written >= self.settings.max_file_bytes:
-            self._roll()
+        return True
 
     def _roll(self) -> None:
         if self.state is RecorderState.RECORDING and self._close_current():

@@ -127,7 +127,14 @@ async def test_a_twin_cycle_is_live_in_foxglove_and_recorded_and_replays(
     assert schemas[Topic.JOINT_STATES] == "pickplace.v1.JointState"
     assert schemas[Topic.CAMERA_COLOR] == "foxglove.CompressedImage"
     assert schemas[Topic.DETECTIONS] == "foxglove.SceneUpdate"
-    assert {Topic.TF, Topic.TASK_STATUS, Topic.PICK_EVENTS, Topic.VISION_OBJECTS, Topic.LOG} <= set(schemas)
+    assert {
+        Topic.TF,
+        Topic.TASK_STATUS,
+        Topic.PICK_EVENTS,
+        Topic.VISION_OBJECTS,
+        Topic.LOG,
+        Topic.ROBOT_DESCRIPTION,
+    } <= set(schemas)
     by_topic: dict[str, list[bytes]] = {}
     for topic, _t, data in messages:
         by_topic.setdefault(topic, []).append(data)

@@ -37,7 +37,11 @@ def test_files_split_by_size_each_one_self_describing_and_indexed(
     settings = RecordSettings(max_file_bytes=16_384, chunk_bytes=4096)
     caplog.set_level(logging.INFO, logger="pickplace.record")
     rec = Recorder(
-        settings, tmp_path, prefix="cell1", attachments={"nova5.urdf": ("application/xml", b"<robot/>")}
+        settings,
+        tmp_path,
+        prefix="cell1",
+        attachments={"nova5.urdf": ("application/xml", b"<robot/>")},
+        latched={Topic.ROBOT_DESCRIPTION: b'{"data": "<robot/>"}'},
     )
     for i in range(2000):
         rec.log(Topic.JOINT_STATES, joint_state(i), 1_000 + i)
@@ -59,8 +63,9 @@ def test_files_split_by_size_each_one_self_describing_and_indexed(
         assert by_topic[Topic.JOINT_STATES].encoding == "protobuf" and by_topic[Topic.JOINT_STATES].data
         assert [a.name for a in summary.attachment_indexes] == ["nova5.urdf"]
         assert summary.statistics.message_count == len(messages)
+        assert sum(t == Topic.ROBOT_DESCRIPTION for t, _ in messages) == 1  # every file has the description
         total += len(messages)
-    assert total == 2000 + 4
+    assert total == 2000 + 4 + len(paths)
     assert [f.bytes for f in rec.files] == [p.stat().st_size for p in paths]
     lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("recorded ")]
     assert len(lines) == len(paths) and all(str(p) in line for p, line in zip(paths, lines, strict=True))
