@@ -10,6 +10,7 @@ import numpy as np
 from pickplace.v1 import vision_pb2
 
 from services.common.errors import InvalidInputError
+from services.common.sensors import RGBDFrame
 
 DEPTH_RANGE_M = (0.2, 2.0)  # the colour map's span: near table top to the floor behind it
 JPEG_QUALITY = 85
@@ -30,13 +31,29 @@ def frame_jpeg(payload: bytes, view: CameraView) -> bytes:
     if view is CameraView.COLOR:
         if len(frame.color_rgb8) != w * h * 3:
             raise InvalidInputError(f"colour image of {len(frame.color_rgb8)} bytes for {w}x{h}")
-        img = cv2.cvtColor(np.frombuffer(frame.color_rgb8, np.uint8).reshape(h, w, 3), cv2.COLOR_RGB2BGR)
+        return image_jpeg(np.frombuffer(frame.color_rgb8, np.uint8).reshape(h, w, 3), None, 0.0, view)
+    if len(frame.depth_u16) != w * h * 2:
+        raise InvalidInputError(f"depth image of {len(frame.depth_u16)} bytes for {w}x{h}")
+    depth = np.frombuffer(frame.depth_u16, "<u2").reshape(h, w)
+    return image_jpeg(None, depth, frame.depth_scale or 1e-3, view)
+
+
+def sensor_frame_jpeg(frame: RGBDFrame, view: CameraView) -> bytes:
+    """The same, from an in-process frame (the embedded cell's camera)."""
+    return image_jpeg(frame.color, frame.depth, frame.depth_scale, view)
+
+
+def image_jpeg(
+    color_rgb: np.ndarray | None, depth: np.ndarray | None, scale: float, view: CameraView
+) -> bytes:
+    if view is CameraView.COLOR:
+        if color_rgb is None:
+            raise InvalidInputError("no colour image in the frame")
+        img = cv2.cvtColor(color_rgb, cv2.COLOR_RGB2BGR)
     else:
-        if len(frame.depth_u16) != w * h * 2:
-            raise InvalidInputError(f"depth image of {len(frame.depth_u16)} bytes for {w}x{h}")
-        z = np.frombuffer(frame.depth_u16, "<u2").reshape(h, w).astype(np.float32) * (
-            frame.depth_scale or 1e-3
-        )
+        if depth is None:
+            raise InvalidInputError("no depth image in the frame")
+        z = depth.astype(np.float32) * np.float32(scale)
         lo, hi = DEPTH_RANGE_M
         scaled = np.clip((z - lo) / (hi - lo), 0, 1)
         img = cv2.applyColorMap((255 * (1 - scaled)).astype(np.uint8), cv2.COLORMAP_TURBO)

@@ -17,6 +17,7 @@ from pickplace.v1 import common_pb2, robot_pb2, task_pb2, vision_pb2
 
 from gateway.camera import detections_json
 from gateway.convert import message_dict
+from services.common.sensors import RGBDFrame
 
 CLIENT_QUEUE = 64
 
@@ -64,7 +65,8 @@ class LiveHub:
         self.camera_jpeg: bytes | None = None
         self.camera_seq = 0
         self.detections: Message | None = None
-        self.frame_payload: bytes | None = None  # the camera's newest RGBDFrame, serialised
+        self.frame_payload: bytes | None = None  # the camera's newest RGBDFrame, serialised (bus)
+        self.frame_object: RGBDFrame | None = None  # or as the in-process camera gave it (embedded cell)
         self.frame_count = 0
         self.view_cache: tuple[tuple[str, int], bytes] | None = None  # ((view, frame_count), jpeg)
         self.sent = 0
@@ -122,6 +124,11 @@ class LiveHub:
     def on_frame(self, payload: bytes) -> None:
         """Any thread (Zenoh's): one assignment; nothing decoded here."""
         self.frame_payload = payload
+        self.frame_count += 1
+
+    def on_sensor_frame(self, frame: RGBDFrame) -> None:
+        """Any thread (the embedded cell's camera tap): one assignment; nothing encoded here."""
+        self.frame_object = frame
         self.frame_count += 1
 
     def on_event(self, kind: str, data: Message) -> None:

@@ -9,7 +9,7 @@ import json
 from fastapi import APIRouter, HTTPException, Response, WebSocket, WebSocketDisconnect
 from google.protobuf.message import DecodeError
 
-from gateway.camera import CameraView, frame_jpeg
+from gateway.camera import CameraView, frame_jpeg, sensor_frame_jpeg
 from gateway.contract import errors
 from gateway.deps import CellDep
 from services.common.errors import InvalidInputError
@@ -70,8 +70,8 @@ async def camera(cell: CellDep, view: CameraView = CameraView.OVERLAY) -> Respon
             raise HTTPException(404, "no camera image received yet (vision service not publishing)")
         jpeg = hub.camera_jpeg
     else:
-        payload = hub.frame_payload
-        if payload is None:
+        payload, frame = hub.frame_payload, hub.frame_object
+        if payload is None and frame is None:
             raise HTTPException(404, "no camera frame received yet (camera not publishing)")
         key = (view, hub.frame_count)
         cached = hub.view_cache
@@ -79,7 +79,11 @@ async def camera(cell: CellDep, view: CameraView = CameraView.OVERLAY) -> Respon
             jpeg = cached[1]
         else:
             try:
-                jpeg = await asyncio.to_thread(frame_jpeg, payload, view)
+                if frame is not None:
+                    jpeg = await asyncio.to_thread(sensor_frame_jpeg, frame, view)
+                else:
+                    assert payload is not None
+                    jpeg = await asyncio.to_thread(frame_jpeg, payload, view)
             except (InvalidInputError, DecodeError) as exc:
                 raise HTTPException(404, f"the newest camera frame cannot be shown: {exc}") from exc
             hub.view_cache = (key, jpeg)
