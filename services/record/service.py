@@ -179,6 +179,7 @@ class RecordService(ServiceShell):
                 on_stopped=self._recording_stopped,
                 latched={Topic.ROBOT_DESCRIPTION: convert.robot_description(self.urdf)},
             )
+            stack.callback(self.recorder.close)  # last: after the converter thread has stopped
         if self.live:
             self._live_context = ctx = foxglove.Context()  # held: a dropped context closes its channels
             self._live_channels = open_channels(ctx)
@@ -252,8 +253,6 @@ class RecordService(ServiceShell):
                     self._queue.get_nowait()
         await asyncio.to_thread(self._thread.join)
         self._thread = None
-        if self.recorder is not None:
-            self.recorder.close()
 
     # ------------------------------------------------------------------ inputs (any thread)
     def _put(self, item: Item) -> None:

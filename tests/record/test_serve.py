@@ -128,3 +128,25 @@ async def test_a_taken_foxglove_port_is_a_configuration_error_naming_it(tmp_path
         with pytest.raises(ConfigurationError, match=f"127.0.0.1:{port}.*--foxglove-port"):
             async with RecordService(s, None):
                 pass
+
+
+async def test_a_recording_whose_live_view_cannot_start_is_still_closed(tmp_path: Path) -> None:
+    import socket
+
+    from services.common.errors import ConfigurationError
+    from services.record.replay import open_recording
+    from services.record.service import RecordService
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        s = load_settings(
+            "sim",
+            overrides={"logging": {"file": None}, "record": {"foxglove": {"port": taken.getsockname()[1]}}},
+        )
+        svc = RecordService(s, None, record_dir=tmp_path)
+        with pytest.raises(ConfigurationError):
+            async with svc:
+                pass
+    assert svc.recorder is not None
+    open_recording(svc.recorder.files[0].path)  # a whole file, footer and summary written
