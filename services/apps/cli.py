@@ -18,6 +18,7 @@ from gateway.cli import db_app
 from services.apps.calibration_cli import app as calibration_app
 from services.apps.record_cli import app as record_app
 from services.apps.record_cli import record_overrides
+from services.apps.ur_cli import app as ur_app
 from services.apps.vision_cli import app as vision_app
 from services.common.aio import run_until_signal
 from services.common.bus import Bus
@@ -46,6 +47,7 @@ app.add_typer(twin_app)  # sim-scene, sim-mjcf
 app.add_typer(vision_app)  # vision-detect, record
 app.add_typer(calibration_app)  # calibrate, calibrate-manual, calibration-check
 app.add_typer(record_app)  # replay
+app.add_typer(ur_app)  # sim-ur
 console = Console()
 log = logging.getLogger("pickplace.cli")
 

@@ -1,0 +1,82 @@
+"""``pickplace sim-ur``: a simulated Universal Robots e-Series controller on a loopback address.
+
+RTDE on 30004, the dashboard on 29999 and the script ports 30001-30003 (ur_rtde fixes them; a second
+simulated controller takes another loopback address, e.g. ``--host 127.0.0.2``). See docs/ur/rtde.md.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import enum
+import logging
+from typing import Annotated
+
+import typer
+
+from services.common.aio import run_until_signal
+from services.common.logs import setup_logging
+from services.common.settings import load_settings
+
+app = typer.Typer(help="Simulated Universal Robots controller.", no_args_is_help=True)
+log = logging.getLogger("pickplace.sim.ur")
+
+
+class URModel(enum.StrEnum):
+    UR5E = "ur5e"
+    UR3 = "ur3"
+
+
+@app.command("sim-ur")
+def sim_ur(
+    model: Annotated[URModel | None, typer.Option(help="arm model (default: robot.model when a UR)")] = None,
+    host: Annotated[
+        str | None, typer.Option(help="loopback address to listen on (default robot.host)")
+    ] = None,
+    speed: Annotated[float, typer.Option(min=0.01, max=100, help="controller time per wall time")] = 1.0,
+    powered: Annotated[
+        bool, typer.Option("--powered/--powered-off", help="boot with brakes released")
+    ] = False,
+    unlock_delay_s: Annotated[float, typer.Option(min=0, help="protective stop unlock delay")] = 5.0,
+    rtde_port: Annotated[int, typer.Option(min=1, max=65535)] = 30004,
+    dashboard_port: Annotated[int, typer.Option(min=1, max=65535)] = 29999,
+    profile: Annotated[str | None, typer.Option("--profile", "-p", help="config profile")] = None,
+) -> None:
+    """Run a simulated UR5e/UR3 controller that ur_rtde drives like a real one, until Ctrl-C."""
+    from services.kinematics.robot_models import get_robot
+    from services.sim.ur.controller import URController, URControllerConfig
+    from services.sim.ur.server import URPorts, URSimServer, check_loopback
+
+    settings = load_settings(profile)
+    setup_logging(settings.logging)
+    name = (
+        model.value
+        if model
+        else (settings.robot.model if settings.robot.model in ("ur5e", "ur3") else "ur5e")
+    )
+    address = host or settings.robot.host
+    try:
+        check_loopback(address)
+    except ValueError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2) from exc
+    config = URControllerConfig(start_powered=powered, unlock_delay_s=unlock_delay_s)
+    controller = URController(get_robot(name), config)
+
+    async def main() -> None:
+        async with URSimServer(controller, address, URPorts(rtde_port, dashboard_port), speed):
+            typer.echo(
+                f"simulated {name} on {address}: RTDE {rtde_port}, dashboard {dashboard_port}, script 30001-30003"
+            )
+            await asyncio.Event().wait()
+
+    try:
+        run_until_signal(main())
+    except asyncio.CancelledError:
+        pass
+    except OSError as exc:
+        typer.echo(f"error: cannot listen on {address}: {exc}", err=True)
+        raise typer.Exit(1) from exc
+
+
+if __name__ == "__main__":  # ``python -m services.apps.ur_cli --host …``: sim-ur without the whole CLI
+    app()
