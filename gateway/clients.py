@@ -17,7 +17,7 @@ import grpc.aio
 from pickplace.v1 import common_pb2, robot_pb2, robot_pb2_grpc, task_pb2, task_pb2_grpc
 
 from services.common.errors import RobotCommunicationError
-from services.common.grpc_util import translate
+from services.common.grpc_util import cell_token, channel, translate
 from services.common.settings import Settings
 from services.common.shell import ServiceShell
 
@@ -34,9 +34,9 @@ CHANNEL_OPTIONS = [
 ]
 
 
-def open_channel(host: str, port: int) -> grpc.aio.Channel:
-    target = f"{host}:{port}" if ":" not in host else f"[{host}]:{port}"
-    return grpc.aio.insecure_channel(target, options=CHANNEL_OPTIONS)
+def open_channel(host: str, port: int, token: str | None = None) -> grpc.aio.Channel:
+    """A channel to a cell service; with the cell's token (gateway.api_token) on every call."""
+    return channel(host, port, token, CHANNEL_OPTIONS)
 
 
 @contextlib.contextmanager
@@ -77,6 +77,7 @@ class CellClients(ServiceShell):
         self._task_port = g.task_port
         self._robot_port = g.robot_port
         self._channels: list[grpc.aio.Channel] = []
+        self._token = cell_token(settings)
         self.task: task_pb2_grpc.TaskControllerStub | None = None
         self.robot: robot_pb2_grpc.RobotControllerStub | None = None
         self.estop_robot: robot_pb2_grpc.RobotControllerStub | None = None
@@ -87,7 +88,7 @@ class CellClients(ServiceShell):
         stack.push_async_callback(self._close_channels)
 
         def open_(host: str, port: int) -> grpc.aio.Channel:
-            ch = open_channel(host, port)
+            ch = open_channel(host, port, self._token)
             self._channels.append(ch)
             return ch
 

@@ -61,9 +61,11 @@ class GrpcCalibrationRobot:
         if self._stub is None:
             from pickplace.v1 import robot_pb2_grpc
 
-            from services.common.grpc_util import channel
+            from services.common.grpc_util import cell_token, channel
 
-            self._channel = channel(self.settings.grpc.host, self.settings.grpc.robot_port)
+            self._channel = channel(
+                self.settings.grpc.host, self.settings.grpc.robot_port, cell_token(self.settings)
+            )
             self._stub = robot_pb2_grpc.RobotControllerStub(self._channel)
         return self
 

@@ -289,9 +289,9 @@ def _scene_reset_between_cycles(s: Settings) -> Callable[[Bus], object] | None:
 def _robot_stub(s: Settings) -> tuple[grpc.aio.Channel, RobotControllerStub]:
     from pickplace.v1 import robot_pb2_grpc
 
-    from services.common.grpc_util import channel
+    from services.common.grpc_util import cell_token, channel
 
-    ch = channel(s.grpc.client_host("robot"), s.grpc.robot_port)
+    ch = channel(s.grpc.client_host("robot"), s.grpc.robot_port, cell_token(s))
     return ch, robot_pb2_grpc.RobotControllerStub(ch)
 
 

@@ -16,9 +16,11 @@ log = logging.getLogger("pickplace.launcher")  # the name its log lines had in t
 async def enable_robot(settings: Settings) -> None:
     from pickplace.v1 import robot_pb2, robot_pb2_grpc
 
-    from services.common.grpc_util import channel, rpc_errors
+    from services.common.grpc_util import cell_token, channel, rpc_errors
 
-    async with channel(settings.grpc.client_host("robot"), settings.grpc.robot_port) as ch:
+    async with channel(
+        settings.grpc.client_host("robot"), settings.grpc.robot_port, cell_token(settings)
+    ) as ch:
         with rpc_errors():
             await robot_pb2_grpc.RobotControllerStub(ch).Enable(robot_pb2.EnableRequest(), timeout=30.0)
 
@@ -28,10 +30,12 @@ async def park_arm(settings: Settings) -> None:
     import numpy as np
     from pickplace.v1 import robot_pb2, robot_pb2_grpc
 
-    from services.common.grpc_util import channel, rpc_errors
+    from services.common.grpc_util import cell_token, channel, rpc_errors
 
     home = np.deg2rad(settings.grasp.safe_home_joints_deg[settings.robot.model]).tolist()
-    async with channel(settings.grpc.client_host("robot"), settings.grpc.robot_port) as ch:
+    async with channel(
+        settings.grpc.client_host("robot"), settings.grpc.robot_port, cell_token(settings)
+    ) as ch:
         stub = robot_pb2_grpc.RobotControllerStub(ch)
         with rpc_errors():
             await stub.ClearError(robot_pb2.ClearErrorRequest(), timeout=30.0)
@@ -44,9 +48,11 @@ async def run_single_cycle(settings: Settings, task: str = "", timeout_s: float 
     """One pick cycle through the task service's gRPC; returns its PickEvent."""
     from pickplace.v1 import task_pb2, task_pb2_grpc
 
-    from services.common.grpc_util import channel, rpc_errors
+    from services.common.grpc_util import cell_token, channel, rpc_errors
 
-    async with channel(settings.grpc.client_host("task"), settings.grpc.task_port) as ch:
+    async with channel(
+        settings.grpc.client_host("task"), settings.grpc.task_port, cell_token(settings)
+    ) as ch:
         with rpc_errors():
             return await task_pb2_grpc.TaskControllerStub(ch).RunSingleCycle(
                 task_pb2.SingleCycleRequest(task=task), timeout=timeout_s

@@ -189,6 +189,8 @@ def topology(
     specs = []
     for name in SERVICES:
         env = {**common, **specific.get(name, {})}
+        if name != "sim-dobot":  # every gRPC service asks for the cell's token, every client sends it
+            env["PICKPLACE_GATEWAY__API_TOKEN"] = api_token
         if log_dir is not None:
             env["PICKPLACE_LOGGING__FILE"] = str(log_dir / f"{name}.log")
         metrics_port = None

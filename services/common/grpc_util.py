@@ -11,15 +11,19 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import enum
+import hmac
 import logging
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
-from typing import Any, Protocol, TypeVar, cast
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar, cast
 
 import grpc
 import grpc.aio
 
 from services.common.errors import RobotCommunicationError, RobotError, error_class
+
+if TYPE_CHECKING:
+    from services.common.settings import Settings
 
 log = logging.getLogger("pickplace.grpc")
 
@@ -90,6 +94,109 @@ class ErrorTranslatingInterceptor(grpc.aio.ServerInterceptor):
                 response_serializer=handler.response_serializer,
             )
         return handler
+
+
+# --- authentication: every call of the cell's gRPC services carries the cell's token (gateway.api_token),
+# ``authorization: Bearer <token>``, as at the gateway's edge; only the health check is open (probes).
+AUTH_KEY = "authorization"
+
+
+def cell_token(settings: Settings) -> str | None:
+    """The cell's token (gateway.api_token): the gateway's edge and every gRPC service ask for it."""
+    token = settings.gateway.api_token
+    return token.get_secret_value() if token is not None else None
+
+
+def bearer_metadata(token: str) -> tuple[tuple[str, str]]:
+    return ((AUTH_KEY, f"Bearer {token}"),)
+
+
+def _presented_token(metadata: Any) -> str | None:
+    for key, value in metadata or ():
+        if key == AUTH_KEY:
+            scheme, _, token = str(value).partition(" ")
+            return token.strip() if scheme.lower() == "bearer" and token.strip() else None
+    return None
+
+
+class TokenAuthInterceptor(grpc.aio.ServerInterceptor):
+    """UNAUTHENTICATED for every call without the token (the health check excepted)."""
+
+    def __init__(self, token: str):
+        if not token:
+            raise ValueError("an empty token authenticates nobody")
+        self._token = token.encode()
+
+    def allows(self, metadata: Any) -> bool:
+        presented = _presented_token(metadata)
+        return presented is not None and hmac.compare_digest(presented.encode(), self._token)
+
+    async def intercept_service(
+        self,
+        continuation: Callable[[grpc.HandlerCallDetails], Awaitable[grpc.RpcMethodHandler[Any, Any] | None]],
+        details: grpc.HandlerCallDetails,
+    ) -> grpc.RpcMethodHandler[Any, Any] | None:
+        handler = await continuation(details)
+        method = str(details.method or "")
+        if (
+            handler is None
+            or method.startswith(f"/{HEALTH_SERVICE}/")
+            or self.allows(details.invocation_metadata)
+        ):
+            return handler
+        message = (
+            "this service needs the cell's token: send 'authorization: Bearer <gateway.api_token>' metadata"
+            if _presented_token(details.invocation_metadata) is None
+            else "bearer token is not valid"
+        )
+        log.warning("refused an unauthenticated call to %s", method)
+
+        async def deny_unary(request: Any, context: grpc.aio.ServicerContext) -> Any:
+            await context.abort(grpc.StatusCode.UNAUTHENTICATED, message)
+
+        async def deny_stream(request: Any, context: grpc.aio.ServicerContext) -> AsyncIterator[Any]:
+            await context.abort(grpc.StatusCode.UNAUTHENTICATED, message)
+            yield  # pragma: no cover  (makes this an async generator)
+
+        if handler.unary_stream is not None:
+            return grpc.unary_stream_rpc_method_handler(
+                deny_stream, handler.request_deserializer, handler.response_serializer
+            )
+        return grpc.unary_unary_rpc_method_handler(
+            deny_unary, handler.request_deserializer, handler.response_serializer
+        )
+
+
+class _BearerUnaryUnary(grpc.aio.UnaryUnaryClientInterceptor):
+    def __init__(self, token: str):
+        self._md = bearer_metadata(token)
+
+    async def intercept_unary_unary(self, continuation: Any, details: Any, request: Any) -> Any:
+        return await continuation(_with_metadata(details, self._md), request)
+
+
+class _BearerUnaryStream(grpc.aio.UnaryStreamClientInterceptor):
+    def __init__(self, token: str):
+        self._md = bearer_metadata(token)
+
+    async def intercept_unary_stream(self, continuation: Any, details: Any, request: Any) -> Any:
+        return await continuation(_with_metadata(details, self._md), request)
+
+
+def _with_metadata(details: Any, extra: tuple[tuple[str, str], ...]) -> Any:
+    metadata = [*(details.metadata or ()), *extra]
+    return grpc.aio.ClientCallDetails(
+        details.method,
+        details.timeout,
+        grpc.aio.Metadata(*metadata),
+        details.credentials,
+        details.wait_for_ready,
+    )
+
+
+def client_interceptors(token: str | None) -> list[grpc.aio.ClientInterceptor]:
+    """What a channel needs to call the cell's services: the token on every call (none without one)."""
+    return [] if not token else [_BearerUnaryUnary(token), _BearerUnaryStream(token)]
 
 
 def create_server(extra_interceptors: list[grpc.aio.ServerInterceptor] | None = None) -> grpc.aio.Server:
@@ -247,6 +354,9 @@ async def run_metered(rpc: str, fn: Callable[[], T], requests: Any, seconds: Any
     return result
 
 
-def channel(host: str, port: int) -> grpc.aio.Channel:
+def channel(
+    host: str, port: int, token: str | None = None, options: list[tuple[str, Any]] | None = None
+) -> grpc.aio.Channel:
+    """A channel to a pickplace gRPC server; with ``token``, every call carries it."""
     target = f"{host}:{port}" if ":" not in host else f"[{host}]:{port}"
-    return grpc.aio.insecure_channel(target)
+    return grpc.aio.insecure_channel(target, options=options, interceptors=client_interceptors(token))

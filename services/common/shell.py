@@ -32,6 +32,7 @@ import grpc.aio
 
 from services.common import grpc_util
 from services.common.bus import Bus
+from services.common.grpc_util import cell_token as cell_token  # the services' shells pass it on
 from services.common.live_config import LiveConfig, OnChange
 from services.common.settings import Settings
 
@@ -180,10 +181,13 @@ class GrpcShell(ServiceShell):
 
     GRACE_S = 0.5  # in-flight calls get this long to finish when the shell stops
 
-    def __init__(self, host: str, port: int) -> None:
+    def __init__(self, host: str, port: int, token: str | None = None) -> None:
+        """``token``: every call but the health check must carry it (``authorization: Bearer``);
+        None serves anyone who can reach the port (a warning says so)."""
         super().__init__()
         self.grpc_host = host
         self.grpc_port = port  # the port asked for (0 = any free); the bound one once running
+        self.grpc_token = token
         self.server: grpc.aio.Server | None = None
 
     async def _serve_grpc(
@@ -194,7 +198,15 @@ class GrpcShell(ServiceShell):
         interceptors: list[grpc.aio.ServerInterceptor] | None = None,
     ) -> int:
         """Build the server, let ``register`` add the servicers, bind, start; stopped on exit."""
-        server = grpc_util.create_server(interceptors)
+        auth = [grpc_util.TokenAuthInterceptor(self.grpc_token)] if self.grpc_token else []
+        if not auth:
+            log.warning(
+                "%s gRPC on %s:%s takes calls without a token: set gateway.api_token",
+                self.kind,
+                self.grpc_host,
+                self.grpc_port,
+            )
+        server = grpc_util.create_server([*auth, *(interceptors or [])])
         register(server)
         grpc_util.add_health(server, self.health)
         self.grpc_port = grpc_util.bind(server, self.grpc_host, self.grpc_port)

@@ -25,7 +25,7 @@ from services.common import grpc_util
 from services.common.errors import ConfigurationError, InvalidInputError
 from services.common.messages import pose_to_matrix
 from services.common.settings import RodStandSettings, Settings
-from services.common.shell import GrpcShell
+from services.common.shell import GrpcShell, cell_token
 from services.grasp.collision import MotionCollisionCheck
 from services.grasp.convert import (
     boxes_from_proto,
@@ -182,7 +182,11 @@ class GraspService(GrpcShell):
 
     def __init__(self, settings: Settings, grpc_port: int | None = None):
         """``grpc_port``: None = ``settings.grpc.grasp_port``; 0 = any free port."""
-        super().__init__(settings.grpc.host, settings.grpc.grasp_port if grpc_port is None else grpc_port)
+        super().__init__(
+            settings.grpc.host,
+            settings.grpc.grasp_port if grpc_port is None else grpc_port,
+            cell_token(settings),
+        )
         self.settings = settings
         self.servicer = GraspPlannerServicer(settings)  # a bad safe-home entry fails here, before serving
 

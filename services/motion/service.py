@@ -24,7 +24,7 @@ from services.common.bus import Bus
 from services.common.errors import InvalidInputError
 from services.common.messages import pose_to_matrix
 from services.common.settings import MotionSettings, Settings
-from services.common.shell import GrpcShell
+from services.common.shell import GrpcShell, cell_token
 from services.kinematics.collision import AttachedObject, Box, Scene
 from services.kinematics.model import ArmModel, Kinematics, load_arm
 from services.kinematics.robot_models import ROBOTS
@@ -320,7 +320,11 @@ class MotionService(GrpcShell):
 
     def __init__(self, settings: Settings, bus: Bus | None = None, grpc_port: int | None = None):
         """``grpc_port``: None = ``settings.grpc.motion_port``; 0 = any free port."""
-        super().__init__(settings.grpc.host, settings.grpc.motion_port if grpc_port is None else grpc_port)
+        super().__init__(
+            settings.grpc.host,
+            settings.grpc.motion_port if grpc_port is None else grpc_port,
+            cell_token(settings),
+        )
         self.settings = settings
         self.bus = bus
         self.servicer = MotionPlannerServicer(settings)

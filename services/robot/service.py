@@ -25,7 +25,7 @@ from services.common.live_config import LiveConfig
 from services.common.messages import pose_to_matrix
 from services.common.settings import Settings
 from services.common.settings.robot import RobotDriverKind
-from services.common.shell import GrpcShell
+from services.common.shell import GrpcShell, cell_token
 from services.kinematics.robot_models import get_robot
 from services.kinematics.tool import tool_frame
 from services.kinematics.trajectory import JointTrajectory
@@ -284,7 +284,11 @@ class RobotService(GrpcShell):
     kind = "robot"
 
     def __init__(self, settings: Settings, bus: Bus | None = None, grpc_port: int | None = None):
-        super().__init__(settings.grpc.host, settings.grpc.robot_port if grpc_port is None else grpc_port)
+        super().__init__(
+            settings.grpc.host,
+            settings.grpc.robot_port if grpc_port is None else grpc_port,
+            cell_token(settings),
+        )
         self.settings = settings
         self.driver = build_driver(settings)
         self.bus = bus

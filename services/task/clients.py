@@ -24,7 +24,7 @@ from services.common.errors import (
     VisionError,
 )
 from services.common.frames import make_transform
-from services.common.grpc_util import channel, rpc_errors
+from services.common.grpc_util import cell_token, channel, rpc_errors
 from services.common.messages import matrix_to_pose, pose_to_matrix
 from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.common.settings import Settings
@@ -71,7 +71,7 @@ class CellClients:
         g = settings.grpc
         self.settings = settings
         self._channels = {
-            name: channel(g.client_host(name), port)  # type: ignore[arg-type]
+            name: channel(g.client_host(name), port, cell_token(settings))  # type: ignore[arg-type]
             for name, port in (
                 ("vision", g.vision_port),
                 ("grasp", g.grasp_port),

@@ -26,7 +26,7 @@ from services.common.errors import InvalidInputError, SafetyError
 from services.common.keys import CellKeys
 from services.common.modes import TaskKind
 from services.common.settings import Settings
-from services.common.shell import GrpcShell, ShellStateError
+from services.common.shell import GrpcShell, ShellStateError, cell_token
 from services.task.clients import CellClients
 from services.task.cycle import CycleConfig, Orchestrator
 from services.task.messages import pick_event_msg
@@ -342,7 +342,11 @@ class TaskService(GrpcShell):
         clients: CellClients | None = None,
         clock: Callable[[], float] | None = None,
     ):
-        super().__init__(settings.grpc.host, settings.grpc.task_port if grpc_port is None else grpc_port)
+        super().__init__(
+            settings.grpc.host,
+            settings.grpc.task_port if grpc_port is None else grpc_port,
+            cell_token(settings),
+        )
         self.settings = settings
         self.clients = clients or CellClients(settings)
         self.bus = bus

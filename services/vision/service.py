@@ -45,7 +45,7 @@ from services.common.sensors import (
     msg_to_frame,
 )
 from services.common.settings import REPO_ROOT, CalibrationSettings, CameraSourceSettings, Settings
-from services.common.shell import GrpcShell
+from services.common.shell import GrpcShell, cell_token
 from services.vision.calibration import manual_T_base_camera, read_calibration
 from services.vision.messages import detections_msg
 from services.vision.overlay import overlay_jpeg
@@ -128,7 +128,11 @@ class VisionService(GrpcShell):
         T_base_camera: Array | None = None,
         publish_loop: bool = True,
     ):
-        super().__init__(settings.grpc.host, settings.grpc.vision_port if grpc_port is None else grpc_port)
+        super().__init__(
+            settings.grpc.host,
+            settings.grpc.vision_port if grpc_port is None else grpc_port,
+            cell_token(settings),
+        )
         self.settings = settings
         self.bus = bus
         self.camera = camera
