@@ -13,12 +13,14 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import time
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
+import numpy as np
 import typer
 from pickplace.v1 import robot_pb2
 from rich.console import Console
@@ -40,10 +42,12 @@ from services.record.service import RecordService
 if TYPE_CHECKING:
     from services.apps.cell import Cell
     from services.robot.service import RobotService
+    from services.task.clients import GrpcMotion
     from services.vision.service import VisionService
 
 app = typer.Typer(no_args_is_help=True)
 console = Console()
+log = logging.getLogger("pickplace.record.cli")
 
 FRAME_TOPICS = ("/camera/color", "/camera/depth", "/camera/calibration", "/tf")
 
@@ -90,6 +94,35 @@ def tap_vision(vision: VisionService, view: RecordService) -> Callable[[], None]
     return lambda: pipeline.__dict__.pop("detect", None)
 
 
+def _plan_view(out: Any, moves: Any, obstacles: Any, boxes_msg: Any) -> tuple[np.ndarray, list[Any], str]:
+    """The joint knots of a plan, the boxes of its scenes (the plan's and each move's own), its labels."""
+    seen: dict[tuple[float, ...], Any] = {}
+    for b in (*obstacles, *(b for m in moves for b in m.obstacles)):
+        seen.setdefault((*np.ravel(b.min), *np.ravel(b.max)), b)
+    paths = [t.positions for t in out if t is not None]
+    q = np.concatenate(paths) if paths else np.zeros((0, 6))
+    return q, boxes_msg(tuple(seen.values())), "+".join(m.label for m in moves if m.label)
+
+
+def tap_motion(motion: GrpcMotion, view: RecordService) -> Callable[[], None]:
+    """Hand every plan the task gets from motion (and the boxes it asked motion to avoid) to the view:
+    nothing publishes plans on the bus. Returns the undo."""
+    from services.task.clients import boxes_msg
+
+    inner = motion.plan_moves
+
+    async def plan_moves(start: Any, moves: Any, obstacles: Any) -> Any:
+        out = await inner(start, moves, obstacles)
+        try:
+            view.offer_plan(*_plan_view(out, moves, obstacles, boxes_msg))
+        except Exception:  # the view must never break the cycle: shown as missing, logged
+            log.warning("record: cannot show a plan", exc_info=True)
+        return out
+
+    setattr(motion, "plan_moves", plan_moves)  # noqa: B010 — an instance attribute over the method, undone on exit
+    return lambda: motion.__dict__.pop("plan_moves", None)
+
+
 @contextlib.asynccontextmanager
 async def cell_live_view(cell: Cell, console: Console) -> AsyncIterator[RecordService | None]:
     s = cell.settings
@@ -101,7 +134,8 @@ async def cell_live_view(cell: Cell, console: Console) -> AsyncIterator[RecordSe
         s, cell.bus, T_base_camera=cell.vision.T_base_camera, robot_status=driver_status(cell.robot)
     )
     async with view:
-        undo = tap_vision(cell.vision, view)
+        undo_vision = tap_vision(cell.vision, view)
+        undo_motion = tap_motion(cell.task.clients.motion, view) if cell.task is not None else (lambda: None)
         try:
             if view.live:
                 console.print(
@@ -112,7 +146,8 @@ async def cell_live_view(cell: Cell, console: Console) -> AsyncIterator[RecordSe
                 console.print(f"recording MCAP under {view.record_dir}")
             yield view
         finally:
-            undo()
+            undo_motion()
+            undo_vision()
 
 
 async def serve_record(settings: Settings) -> None:

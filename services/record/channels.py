@@ -37,6 +37,8 @@ class Topic(enum.StrEnum):
     CAMERA_CALIBRATION = "/camera/calibration"
     DETECTIONS = "/detections"
     VISION_OBJECTS = "/vision/objects"
+    PLAN = "/plan"
+    PLANNING_SCENE = "/planning_scene"
     TASK_STATUS = "/task/status"
     PICK_EVENTS = "/pick_events"
     ROBOT_STATUS = "/robot/status"
@@ -139,6 +141,8 @@ def channel_specs() -> dict[Topic, ChannelSpec]:
         _foxglove(Topic.CAMERA_CALIBRATION, CameraCalibration, "intrinsics of the frames"),
         _foxglove(Topic.DETECTIONS, SceneUpdate, "rods, cubes and obstacle boxes vision reports"),
         _proto(Topic.VISION_OBJECTS, vision_pb2.DetectedObjects, "vision's DetectedObjects as published"),
+        _foxglove(Topic.PLAN, SceneUpdate, "the planned tool path of the current cycle, as a line"),
+        _foxglove(Topic.PLANNING_SCENE, SceneUpdate, "the collision boxes and table motion planned around"),
         _proto(Topic.TASK_STATUS, task_pb2.TaskStatus, "cycle state on every change and at 2 Hz"),
         _proto(Topic.PICK_EVENTS, task_pb2.PickEvent, "one per pick attempt"),
         _json(Topic.ROBOT_STATUS, ROBOT_STATUS_SCHEMA, "mode, e-stop, alarms with their meanings"),

@@ -35,7 +35,7 @@ from typing import Any
 import foxglove
 import numpy as np
 from foxglove.websocket import ChannelView, Client, ServerListener
-from pickplace.v1 import common_pb2, robot_pb2, vision_pb2
+from pickplace.v1 import common_pb2, motion_pb2, robot_pb2, vision_pb2
 
 from services.common.bus import Bus
 from services.common.errors import ConfigurationError
@@ -43,10 +43,11 @@ from services.common.keys import CellKeys
 from services.common.sensors import RGBDFrame, msg_to_frame
 from services.common.settings import Settings
 from services.common.shell import ServiceShell
+from services.kinematics.analytic import fk
 from services.kinematics.robot_models import get_robot
 from services.kinematics.tool import tool_geometry
 from services.kinematics.urdf import robot_urdf
-from services.record import convert
+from services.record import convert, scene
 from services.record.channels import Topic, open_channels
 from services.record.writer import Opener, Recorder, RecordingStopped, open_new
 
@@ -67,6 +68,7 @@ class Kind(enum.Enum):
     BUS_FRAME = enum.auto()
     FRAME = enum.auto()
     LOG = enum.auto()
+    PLAN = enum.auto()
     RESEND = enum.auto()  # a client subscribed: send the description and calibration again
     STOP = enum.auto()
 
@@ -270,6 +272,10 @@ class RecordService(ServiceShell):
         else:
             self._put(item)
 
+    def offer_plan(self, q_path: np.ndarray, boxes: list[motion_pb2.CollisionBox], label: str = "") -> None:
+        """A plan the task received (joint knots, (n, 6)) and the boxes it asked motion to avoid."""
+        self._put(Item(Kind.PLAN, time.time_ns(), (np.asarray(q_path, dtype=float), list(boxes), label)))
+
     @property
     def frames_waiting(self) -> int:
         return len(self._frames)
@@ -350,7 +356,7 @@ class RecordService(ServiceShell):
             objs = vision_pb2.DetectedObjects.FromString(item.payload)
             self._emit(Topic.VISION_OBJECTS, item.payload, t)
             size = self.settings.vision.cubes.cube_size_m
-            self._emit(Topic.DETECTIONS, convert.scene_update(objs, self.transforms.camera_frame, size), t)
+            self._emit(Topic.DETECTIONS, scene.scene_update(objs, self.transforms.camera_frame, size), t)
         elif k is Kind.TASK_STATUS:
             self._emit(Topic.TASK_STATUS, item.payload, t)
         elif k is Kind.PICK:
@@ -373,6 +379,13 @@ class RecordService(ServiceShell):
                 return
             stamp, levelno, name, msg, path, line = item.payload
             self._emit(Topic.LOG, convert.log_message(stamp, levelno, name, msg, path, line), t)
+        elif k is Kind.PLAN:
+            q_path, boxes, label = item.payload
+            m = self.settings.motion
+            self._emit(Topic.PLANNING_SCENE, scene.planning_scene(boxes, m.table_z_m, m.padding_m, t), t)
+            if len(q_path):
+                xyz = fk(self.spec, q_path, self.tool.T_flange_tool())[:, :3, 3]
+                self._emit(Topic.PLAN, scene.plan_line(xyz, t, label), t)
         elif k is Kind.RESEND:
             self._emit(Topic.ROBOT_DESCRIPTION, convert.robot_description(self.urdf), t, record=False)
             if self._calibration is not None:

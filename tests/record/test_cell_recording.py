@@ -43,6 +43,19 @@ class FullDisk(io.BytesIO):
         return super().write(data)
 
 
+def decoder(advertised: dict):  # type: ignore[no-untyped-def, type-arg]
+    """Decodes a channel's messages from the schema the server advertised (base64 FileDescriptorSet)."""
+    import base64
+
+    from mcap.records import Schema
+
+    data = base64.b64decode(advertised["schema"])
+    schema = Schema(id=1, name=advertised["schemaName"], encoding="protobuf", data=data)
+    fn = DecoderFactory().decoder_for("protobuf", schema)
+    assert fn is not None
+    return fn
+
+
 def read_mcap(path: Path):  # type: ignore[no-untyped-def]
     with path.open("rb") as f:
         reader = make_reader(f)
@@ -90,6 +103,8 @@ async def test_a_twin_cycle_is_live_in_foxglove_and_recorded_and_replays(
                 Topic.ROBOT_DESCRIPTION,
                 Topic.ROBOT_STATUS,
                 Topic.LOG,
+                Topic.PLAN,
+                Topic.PLANNING_SCENE,
             )
             outcome = await cell.task.runner.run_cycle(TaskKind.STAND_ROD)  # type: ignore[union-attr]
             await cell.settle(0.5)  # the last states and the pick event reach the view
@@ -111,6 +126,17 @@ async def test_a_twin_cycle_is_live_in_foxglove_and_recorded_and_replays(
     )
     # the full disk's error event shows in the live log as well
     assert any(b"recording stopped" in p and b"No space left" in p for _t, p in client.received[Topic.LOG])
+    # the plans of the cycle as tool-path lines, and the scene motion planned them in (table, obstacle box)
+    decode = {t: decoder(client.channels[t]) for t in (Topic.PLAN, Topic.PLANNING_SCENE)}
+    plans = [decode[Topic.PLAN](p) for _t, p in client.received[Topic.PLAN]]
+    assert plans and all(len(u.entities[0].lines[0].points) >= 2 for u in plans)
+    lo, hi = np.array(cell.settings.robot.workspace.min), np.array(cell.settings.robot.workspace.max)
+    for u in plans:
+        pts = np.array([(p.x, p.y, p.z) for p in u.entities[0].lines[0].points])
+        assert np.all(pts >= lo - 1e-6) and np.all(pts <= hi + 1e-6)  # tool tip paths inside the workspace
+    scenes = [decode[Topic.PLANNING_SCENE](p) for _t, p in client.received[Topic.PLANNING_SCENE]]
+    ids = {e.id for u in scenes for e in u.entities}
+    assert "table" in ids and any(i.startswith("box:obstacle") for i in ids)  # the twin scene has an obstacle
 
     # --- the full disk: an event naming the file and the cause; the cell finished its cycle regardless
     assert len(stopped) == 1 and "No space left" in stopped[0].reason

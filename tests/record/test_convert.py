@@ -10,7 +10,7 @@ import pytest
 from google.protobuf import descriptor_pb2
 from mcap.records import Schema
 from mcap_protobuf.decoder import DecoderFactory
-from pickplace.v1 import common_pb2, robot_pb2, vision_pb2
+from pickplace.v1 import common_pb2, motion_pb2, robot_pb2, vision_pb2
 from scipy.spatial.transform import Rotation
 
 from services.common.errors import InvalidInputError
@@ -19,7 +19,7 @@ from services.kinematics.model import Kinematics, load_arm
 from services.kinematics.robot_models import get_robot
 from services.kinematics.tool import ToolGeometry
 from services.kinematics.urdf import robot_urdf
-from services.record import convert
+from services.record import convert, scene
 from services.record.channels import Encoding, Topic, channel_specs
 
 
@@ -106,7 +106,7 @@ def test_detections_become_one_scene_update_in_the_base_frame_with_labels() -> N
         base=vision_pb2.BoxBounds(min=_vec(0.1, 0.1, 0.0), max=_vec(0.2, 0.3, 0.15)),
         color_label="blue",
     )
-    update = decode(Topic.DETECTIONS, convert.scene_update(objs, "camera", 0.05))
+    update = decode(Topic.DETECTIONS, scene.scene_update(objs, "camera", 0.05))
     assert len(update.deletions) == 1  # the previous scene is replaced
     by_id = {e.id: e for e in update.entities}
     assert set(by_id) == {"rod0", "cube0", "obstacle0"}
@@ -138,3 +138,18 @@ def test_camera_payloads_round_trip() -> None:
     assert raw.encoding == "16UC1" and np.array_equal(np.frombuffer(raw.data, "<u2").reshape(6, 8), depth)
     jpg = decode(Topic.CAMERA_COLOR, convert.color_jpeg(np.full((6, 8, 3), 200, np.uint8), 7, "camera", 90))
     assert jpg.format == "jpeg" and jpg.data[:2] == b"\xff\xd8"
+
+
+def test_the_plan_is_one_line_through_the_tool_path_and_the_scene_holds_table_and_boxes() -> None:
+    xyz = np.array([[0.4, 0.0, 0.3], [0.45, 0.05, 0.2], [0.5, 0.1, 0.1]])
+    line = decode(Topic.PLAN, scene.plan_line(xyz, 9, "GRASP"))
+    (entity,) = line.entities
+    assert entity.frame_id == "base" and len(entity.lines) == 1
+    assert [(p.x, p.y, p.z) for p in entity.lines[0].points] == [tuple(r) for r in xyz]
+    box = motion_pb2.CollisionBox(name="obstacle0", x_min=0.1, x_max=0.2, y_min=-0.1, y_max=0.1, z_max=0.15)
+    update = decode(Topic.PLANNING_SCENE, scene.planning_scene([box], 0.0, 0.01, 9))
+    by_id = {e.id: e for e in update.entities}
+    assert set(by_id) == {"table", "box:obstacle0"}
+    assert by_id["box:obstacle0"].cubes[0].size.x == pytest.approx(0.1)
+    assert "+10 mm" in by_id["box:obstacle0"].texts[0].text
+    assert by_id["table"].cubes[0].pose.position.z < 0  # the table's top at table_z
