@@ -23,8 +23,9 @@ import os
 import shutil
 import signal
 import time
-from collections.abc import Awaitable, Callable, Sequence
+from collections.abc import Awaitable, Callable, Iterator, Sequence
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -308,6 +309,45 @@ class Launcher:
         )
 
 
+# ---------------------------------------------------------------------------- state and session log
+def session_log_path(settings: Settings, started: datetime, kind: str) -> Path:
+    """``session-<kind>-<UTC start>.log`` beside the rotating main log (or in the state directory's
+    log/ when there is no main log file)."""
+    main = settings.logging.file
+    if main:
+        folder = Path(main).parent if Path(main).is_absolute() else (REPO_ROOT / main).parent
+    else:
+        folder = settings.state.path(settings.cell_id, REPO_ROOT) / "log"
+    return folder / f"session-{settings.cell_id}-{kind}-{started.strftime('%Y%m%dT%H%M%SZ')}.log"
+
+
+@contextlib.contextmanager
+def session_log(settings: Settings, kind: str) -> Iterator[Path | None]:
+    """One log file for this run alone (``state.session_log``), named by its start time; the root
+    logger writes to it until the run ends."""
+    if not settings.state.session_log:
+        yield None
+        return
+    path = session_log_path(settings, datetime.now(UTC), kind)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handler = logging.FileHandler(path, encoding="utf-8")
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)-7s %(name)s: %(message)s"))
+    handler.setLevel(settings.logging.level)
+    root = logging.getLogger()
+    root.addHandler(handler)
+    logging.getLogger("pickplace.session").info(
+        "session of cell %s (%s) started; state in %s",
+        settings.cell_id,
+        kind,
+        settings.state.path(settings.cell_id, REPO_ROOT),
+    )
+    try:
+        yield path
+    finally:
+        root.removeHandler(handler)
+        handler.close()
+
+
 # ---------------------------------------------------------------------------- `pickplace up --processes`
 async def run_processes(
     settings: Settings,
@@ -324,7 +364,7 @@ async def run_processes(
     console = console or Console()
     ports = ports or LocalPorts.from_settings(settings)
     token = settings.gateway.api_token.get_secret_value() if settings.gateway.api_token else generate_token()
-    var = REPO_ROOT / "var"
+    var = settings.state.path(settings.cell_id, REPO_ROOT)  # this cell's own: never another cell's files
     specs = topology(
         settings,
         ports,
@@ -348,17 +388,24 @@ async def run_processes(
         )
         console.print(f"pick {ev.pick_id[:8]} {ev.object_class or '-'}: {what} in {ev.cycle_time_s:.1f} s")
 
-    async with Launcher(
-        settings, specs, ports, log_dir=var / "log" / "processes", metrics_root=var / "metrics", on_event=show
-    ) as launcher:
-        console.print(
-            f"[bold]pickplace[/bold] cell [cyan]{settings.cell_id}[/cyan] as {len(specs)} processes; "
-            f"dashboard http://127.0.0.1:{ports.gateway}/#token={token}; logs in {launcher.log_dir}; "
-            "Ctrl-C stops them all"
-        )
-        if not drive:
-            await asyncio.Event().wait()
-        return await drive_cycles(launcher.settings, cycles, on_pick)
+    with session_log(settings, "processes") as session:
+        async with Launcher(
+            settings,
+            specs,
+            ports,
+            log_dir=var / "log" / "processes",
+            metrics_root=var / "metrics",
+            on_event=show,
+        ) as launcher:
+            console.print(
+                f"[bold]pickplace[/bold] cell [cyan]{settings.cell_id}[/cyan] as {len(specs)} processes; "
+                f"dashboard http://127.0.0.1:{ports.gateway}/#token={token}; logs in {launcher.log_dir}"
+                + (f", this session's in {session}" if session else "")
+                + "; Ctrl-C stops them all"
+            )
+            if not drive:
+                await asyncio.Event().wait()
+            return await drive_cycles(launcher.settings, cycles, on_pick)
     return []  # pragma: no cover - the context manager above always returns or raises
 
 

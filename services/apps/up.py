@@ -14,7 +14,7 @@ import contextlib
 import itertools
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import AsyncIterator, Callable
 
 from rich.console import Console, Group
 from rich.live import Live
@@ -24,6 +24,7 @@ from rich.text import Text
 from services.apps.cell import Cell
 from services.apps.record_cli import cell_live_view
 from services.common.bus import Bus
+from services.common.sensors import Camera, CameraIntrinsics, RGBDFrame
 from services.common.settings import Settings
 from services.robot.demo_cycle import CycleEvent, CycleReport, run_keypose_cycle
 from services.robot.service import RobotService
@@ -78,6 +79,25 @@ def _status_table(runner, started: float, last: PickOutcome | None) -> Group:  #
     return Group(*lines)
 
 
+def with_state_dir(settings: Settings) -> Settings:
+    """The gateway's spill file in this cell's state directory (``state.dir``, default var/<cell_id>)
+    unless one was configured: two cells on one checkout never share it."""
+    from services.common.settings import REPO_ROOT
+    from services.common.settings.gateway import GatewaySettings
+
+    gw = settings.gateway
+    if gw.pick_spill_file != GatewaySettings.model_fields["pick_spill_file"].default:
+        return settings
+    spill = settings.state.path(settings.cell_id, REPO_ROOT) / "gateway" / "pick_spill.jsonl"
+    return settings.model_copy(update={"gateway": gw.model_copy(update={"pick_spill_file": str(spill)})})
+
+
+@contextlib.asynccontextmanager
+async def aio_session(cm: contextlib.AbstractContextManager[object]) -> AsyncIterator[object]:
+    with cm as value:
+        yield value
+
+
 def cell_keeps_running(cycles: int, task_running: bool, cycles_done: int) -> bool:
     """Whether ``pickplace up`` stays up. It lives until Ctrl-C or SIGTERM: a Stop, an e-stop from any
     source or a failed task leave every service up (so Reset and Start, or a calibration, can follow).
@@ -96,13 +116,18 @@ async def run_pick_cell(
     started = time.perf_counter()
     last: list[PickOutcome] = []
     from gateway.server import embedded_gateway
+    from services.apps.launcher import session_log
 
+    settings = with_state_dir(settings)
     async with (
+        aio_session(session_log(settings, "up")),
         Cell(settings, engine="twin") as cell,
-        embedded_gateway(cell.settings, cell.bus, calibration_executor=_calibration_executor(cell)) as (
-            _gw,
-            url,
-        ),
+        embedded_gateway(
+            cell.settings,
+            cell.bus,
+            calibration_executor=_calibration_executor(cell),
+            metrics_registries=_service_registries(cell),
+        ) as (_gw, url),
         cell_live_view(cell, console),  # Foxglove live view and --record (record.*)
     ):
         runner = cell.task.runner  # type: ignore[union-attr]
@@ -115,6 +140,7 @@ async def run_pick_cell(
             f"task {s.grpc.task_port}, Zenoh {s.zenoh.listen}; calibration: {cell.vision.calibration_source}"  # type: ignore[union-attr]
         )
         console.print("Ctrl-C stops after a summary. Another terminal: [green]pickplace robot watch[/green]")
+        _tap_camera(cell, _gw.app.state.cell.hub.on_sensor_frame)
         runner.start(cycles=cycles)
         if on_ready is not None:
             on_ready(cell, url)
@@ -131,6 +157,37 @@ async def run_pick_cell(
                 await runner.stop()
             _pick_summary(console, runner.counters, runner.outcomes)
         return runner.counters
+
+
+class _FrameTap:
+    """The vision service's camera, handing every frame it captures to the dashboard too (its colour
+    and depth views), so the embedded cell needs no frame stream on the bus."""
+
+    def __init__(self, camera: Camera, on_frame: Callable[[RGBDFrame], None]):
+        self._camera = camera
+        self._on_frame = on_frame
+
+    @property
+    def intrinsics(self) -> CameraIntrinsics:
+        return self._camera.intrinsics
+
+    def capture(self) -> RGBDFrame:
+        frame = self._camera.capture()
+        self._on_frame(frame)
+        return frame
+
+    def close(self) -> None:
+        self._camera.close()
+
+
+def _tap_camera(cell: Cell, on_frame: Callable[[RGBDFrame], None]) -> None:
+    if cell.vision is not None and cell.vision.camera is not None:
+        cell.vision.camera = _FrameTap(cell.vision.camera, on_frame)
+
+
+def _service_registries(cell: Cell) -> list[object]:
+    """The other services' metric registries, exported at the gateway's /metrics (vision's latency)."""
+    return [cell.vision.metrics.registry] if cell.vision is not None else []
 
 
 def _calibration_executor(cell: Cell):  # type: ignore[no-untyped-def]

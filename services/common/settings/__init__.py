@@ -39,7 +39,7 @@ from services.common.settings.loader import (
 )
 from services.common.settings.motion import MotionSettings, ToolSettings
 from services.common.settings.net import GrpcSettings, ZenohSettings
-from services.common.settings.observability import LoggingSettings, MetricsSettings
+from services.common.settings.observability import LoggingSettings, MetricsSettings, StateSettings
 from services.common.settings.record import FoxgloveSettings, McapCompression, RecordSettings
 from services.common.settings.robot import (
     KeyPoseCycleSettings,
@@ -100,6 +100,7 @@ __all__ = [
     "RodStandSettings",
     "Settings",
     "SimSettings",
+    "StateSettings",
     "TablePlaneSettings",
     "TaskSettings",
     "ToolSettings",

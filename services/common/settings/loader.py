@@ -26,7 +26,7 @@ from services.common.settings.grasp import GraspSettings
 from services.common.settings.gripper import GripperSettings
 from services.common.settings.motion import MotionSettings
 from services.common.settings.net import GrpcSettings, ZenohSettings
-from services.common.settings.observability import LoggingSettings, MetricsSettings
+from services.common.settings.observability import LoggingSettings, MetricsSettings, StateSettings
 from services.common.settings.record import RecordSettings
 from services.common.settings.robot import KeyPoseCycleSettings, RobotSettings
 from services.common.settings.sim import SimSettings
@@ -61,6 +61,7 @@ class Settings(BaseSettings):
     task: TaskSettings = TaskSettings()
     metrics: MetricsSettings = MetricsSettings()
     record: RecordSettings = RecordSettings()
+    state: StateSettings = StateSettings()
 
     @model_validator(mode="after")
     def _profile_safety(self) -> Settings:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Literal
 
 from pydantic import Field, model_validator
@@ -32,3 +33,19 @@ class LoggingSettings(Model):
     file: str | None = "var/log/pickplace.log"
     max_bytes: int = 10 * 1024 * 1024
     backups: int = 5
+
+
+class StateSettings(Model):
+    """Where a run keeps its files: the processes' metrics and logs, the gateway's spill file."""
+
+    dir: str | None = Field(
+        None, description="absolute, or relative to the checkout; default var/<cell_id>, one per cell"
+    )
+    session_log: bool = Field(True, description="each run also logs to session-<start time>.log")
+
+    def path(self, cell_id: str, root: Path) -> Path:
+        """This cell's state directory: another cell's (another cell_id) never overlaps it."""
+        if self.dir is None:
+            return root / "var" / cell_id
+        p = Path(self.dir)
+        return p if p.is_absolute() else root / p
