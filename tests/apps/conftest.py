@@ -21,6 +21,7 @@ def cell_settings(tmp_path, **overrides) -> Settings:  # type: ignore[no-untyped
             "twin": {"initial_joints_deg": [180.0, 0.0, 90.0, 0.0, -90.0, 0.0]},
         },
         "task": {"detect_retry_delay_s": 0.05, "reset_scene_each_cycle": False},
+        "record": {"foxglove": {"port": 0}},  # `pickplace up`'s live view on a free port, never 8765
     }
     return load_settings("sim", overrides=deep_merge(base, overrides))
 
