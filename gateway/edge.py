@@ -223,13 +223,21 @@ class EdgeServer(GrpcShell):
         async def state() -> str:
             return self._status()
 
+        from pickplace.v1 import robot_control_pb2_grpc
+
+        from gateway.compat import LldRobotController  # the LLD's names, relayed the same way
+
         def register(server: grpc.aio.Server) -> None:
-            robot_pb2_grpc.add_RobotControllerServicer_to_server(RobotControllerRelay(self._cell), server)
+            relay = RobotControllerRelay(self._cell)
+            robot_pb2_grpc.add_RobotControllerServicer_to_server(relay, server)
             gateway_pb2_grpc.add_CellMetricsServicer_to_server(CellMetricsServicer(self._cell, state), server)
+            robot_control_pb2_grpc.add_RobotControllerServicer_to_server(
+                LldRobotController(self._cell, relay), server
+            )
 
         await self._serve_grpc(
             stack,
             register,
-            "the gRPC edge (RobotController, CellMetrics)",
+            "the gRPC edge (RobotController, CellMetrics, robot_control.RobotController)",
             [TokenAuthInterceptor(self._token)],
         )
