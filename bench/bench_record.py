@@ -94,7 +94,7 @@ async def _one_minute(settings: Settings, live: bool, record_dir: Path | None) -
     return time.process_time() - cpu0
 
 
-async def _cycles(settings: Settings, record_dir: Path | None) -> tuple[list[float], list[float]]:
+async def _cycles(settings: Settings, record_dir: Path | None) -> tuple[list[float], list[float], list[bool]]:
     from services.apps.cell import Cell, with_updates
     from services.apps.record_cli import cell_live_view
 
@@ -111,7 +111,7 @@ async def _cycles(settings: Settings, record_dir: Path | None) -> tuple[list[flo
             )
         }
     )
-    controller, wall = [], []
+    controller, wall, ok = [], [], []
     async with Cell(s, seed=3) as cell, cell_live_view(cell, Console(file=io.StringIO())):
         for k in range(N_CYCLES):
             if k:
@@ -122,7 +122,8 @@ async def _cycles(settings: Settings, record_dir: Path | None) -> tuple[list[flo
             if not outcome.success:
                 print(f"  cycle on seed {3 + k} failed ({outcome.stage_reached}: {outcome.failure_reason})")
             controller.append(outcome.cycle_time_s)
-    return controller, wall
+            ok.append(outcome.success)
+    return controller, wall, ok
 
 
 def main() -> None:
@@ -142,16 +143,22 @@ def main() -> None:
             )
         base = asyncio.run(_cycles(_settings(tmp), None))
         recd = asyncio.run(_cycles(_settings(tmp), tmp / "cycles"))
-    for label, (ctrl, wall) in (("without recording", base), ("with recording", recd)):
+    for label, (ctrl, wall, ok) in (("without recording", base), ("with recording", recd)):
         print(
-            f"{label:18s}: cycle {sum(ctrl) / len(ctrl):.2f} s on the controller clock, "
-            f"{sum(wall) / len(wall):.2f} s wall ({N_CYCLES} cycles: "
-            + ", ".join(f"{c:.2f}" for c in ctrl)
-            + " s)"
+            f"{label:18s}: {sum(ok)}/{len(ok)} cycles succeeded; controller-clock cycle times "
+            + ", ".join(f"{c:.2f}" + ("" if good else " (failed)") for c, good in zip(ctrl, ok, strict=True))
+            + f" s; {sum(wall) / len(wall):.2f} s wall on average"
         )
-    paired = [100 * (r / b - 1) for r, b in zip(recd[0], base[0], strict=True)]
+    paired = [
+        100 * (r / b - 1)
+        for r, b, r_ok, b_ok in zip(recd[0], base[0], recd[2], base[2], strict=True)
+        if r_ok and b_ok
+    ]
+    if not paired:
+        print("no scene seed with a successful cycle both with and without recording: nothing to compare")
+        return
     print(
-        "recording vs not, same scene seeds: "
+        "recording vs not, same scene seeds, both successful: "
         + ", ".join(f"{d:+.1f} %" for d in paired)
         + f" (mean {sum(paired) / len(paired):+.1f} %, target ≤ +2 %; the spread is the twin's run-to-run noise)"
     )
