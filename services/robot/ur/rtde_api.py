@@ -16,6 +16,7 @@ from services.robot.ur.feedback import RECEIVE_VARIABLES, URSample
 
 PROGRAM_START_TIMEOUT_S = 5.0  # ur_rtde's own wait for its script (waitForProgramRunning)
 CONSISTENT_READ_TRIES = 5
+CONTROL_SELF_RECONNECT_S = 0.5  # ur_rtde's control interface reconnecting itself after a loss
 
 
 def _modules() -> tuple[Any, Any, Any]:
@@ -58,21 +59,20 @@ class Interfaces:
         self.receive = rtde_receive.RTDEReceiveInterface(host, frequency_hz, RECEIVE_VARIABLES)
 
     def close(self, graceful: bool = True) -> None:
-        """Disconnect everything. The control interface goes first and alone: its disconnect joins its
-        receive thread, which after a lost connection may be reconnecting on its own (ur_rtde's
-        receiveCallback), so nothing else touches the controller until it has stopped. ``graceful``
-        (a sound link) stops the control script first; after a loss nothing is asked of a control
-        interface whose socket may be dead (a write there can end the process from C++). The other
-        disconnects sleep 500 ms each in ur_rtde, so they run side by side."""
-        control, self.control = self.control, None
+        """Disconnect the receive interface and the dashboard (side by side: each ur_rtde disconnect
+        sleeps 500 ms). ``graceful`` (a sound link, the link closing) also stops the control script and
+        disconnects the control interface. After a loss the control interface is left alone: its own
+        receive thread reconnects it (ur_rtde's receiveCallback) and disconnecting it meanwhile races
+        that thread inside ur_rtde (a segfault, seen in tests/robot/ur); ``ensure_control`` takes it
+        back, or sets it aside, once that attempt is over."""
         objs = [o for o in (self.receive, self.db) if o is not None]
         self.receive = self.db = None
-        if control is not None:
-            if graceful:
-                with contextlib.suppress(RuntimeError):
-                    if control.isConnected() and control.isProgramRunning():
-                        control.stopScript()
-            _quiet_disconnect(control)
+        if graceful and self.control is not None:
+            control, self.control = self.control, None
+            with contextlib.suppress(RuntimeError):
+                if control.isConnected() and control.isProgramRunning():
+                    control.stopScript()
+            objs.append(control)
         threads = [threading.Thread(target=_quiet_disconnect, args=(o,), name="ur-disconnect") for o in objs]
         for t in threads:
             t.start()
@@ -82,8 +82,13 @@ class Interfaces:
     def ensure_control(self) -> None:
         _, _, rtde_control = _modules()
         if self.control is not None and not self.control.isConnected():
-            self.control.disconnect()
-            self.control = None
+            # a lost link: give ur_rtde's own reconnect its chance, then set a dead interface aside
+            deadline = time.monotonic() + CONTROL_SELF_RECONNECT_S
+            while not self.control.isConnected() and time.monotonic() < deadline:
+                time.sleep(0.01)
+            if not self.control.isConnected():
+                _UNDESTROYABLE.append(self.control)  # its thread has given up; its destructor may throw
+                self.control = None
         if self.control is None:
             self.control = rtde_control.RTDEControlInterface(self.host, self.frequency_hz)
         elif not self.control.isProgramRunning() and not self.control.reuploadScript():

@@ -90,6 +90,7 @@ class URController:
         self.script: ControlScript | None = None
         self.events: list[Event] = []
         self.ticks = 0
+        self._pose_cache: dict[bytes, tuple[float, ...]] = {}
 
     # ------------------------------------------------------------------ log
     def note(self, text: str) -> None:
@@ -247,8 +248,6 @@ class URController:
     def outputs(self, names: Iterable[str] = ()) -> dict[str, Any]:
         """Every output variable's value now, registers only those in ``names`` (the RTDE server
         picks the fields of each recipe)."""
-        T = analytic.fk(self.spec, self.q, self.arm.T_flange_tcp)
-        T_target = analytic.fk(self.spec, self.arm.ref.q, self.arm.T_flange_tcp)
         z6 = (0.0,) * 6
         status = RobotStatusBit(0)
         if self.robot_mode in (URRobotMode.POWER_ON, URRobotMode.IDLE, URRobotMode.RUNNING):
@@ -266,10 +265,10 @@ class URController:
             "actual_qd": tuple(self.qd),
             "actual_current": z6,
             "joint_control_output": z6,
-            "actual_TCP_pose": tuple(transform_to_pose(T)),
+            "actual_TCP_pose": self._tcp_pose(self.q),
             "actual_TCP_speed": z6,
             "actual_TCP_force": z6,
-            "target_TCP_pose": tuple(transform_to_pose(T_target)),
+            "target_TCP_pose": self._tcp_pose(self.arm.ref.q),
             "target_TCP_speed": z6,
             "actual_digital_input_bits": self.digital_inputs,
             "joint_temperatures": (30.0,) * 6,
@@ -313,6 +312,18 @@ class URController:
                     table = self.in_int if reg[1] == "int" else self.in_double
                 out[name] = table[reg[2]]
         return out
+
+    def _tcp_pose(self, q: np.ndarray) -> tuple[float, ...]:
+        """The TCP pose of ``q`` (forward kinematics with the program's TCP), cached: at rest or for
+        actual and target alike it is the same pose every cycle."""
+        key = q.tobytes() + self.arm.T_flange_tcp.tobytes()
+        hit = self._pose_cache.get(key)
+        if hit is None:
+            if len(self._pose_cache) > 8:
+                self._pose_cache.clear()
+            hit = tuple(transform_to_pose(analytic.fk(self.spec, q, self.arm.T_flange_tcp)).tolist())
+            self._pose_cache[key] = hit
+        return hit
 
     @property
     def safety_status_bits(self) -> SafetyStatusBit:

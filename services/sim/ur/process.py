@@ -26,7 +26,7 @@ REQUEST_TIMEOUT_S = 10.0
 class SimRequest(enum.Enum):
     SNAPSHOT = "snapshot"
     ESTOP = "estop"  # arg: pressed (bool)
-    CUT_LINKS = "cut links"
+    CUT_LINKS = "cut links"  # arg: outage (s of wall time) before connections are accepted again
     EVENTS = "events"
     STOP = "stop"
 
@@ -69,7 +69,7 @@ async def _serve(spec: SimSpec, conn: multiprocessing.connection.Connection) -> 
             controller.press_estop(bool(arg))
             return None
         if kind is SimRequest.CUT_LINKS:
-            await server.cut_links()
+            await server.cut_links(float(arg or 0.0))
             return None
         if kind is SimRequest.EVENTS:
             return [e.text for e in controller.events]
@@ -154,8 +154,9 @@ class URSimProcess:
     def press_estop(self, pressed: bool = True) -> None:
         self.request(SimRequest.ESTOP, pressed)
 
-    def cut_links(self) -> None:
-        self.request(SimRequest.CUT_LINKS)
+    def cut_links(self, outage_s: float = 0.0) -> None:
+        """Pull the cable for ``outage_s`` (returns once it is back)."""
+        self.request(SimRequest.CUT_LINKS, outage_s)
 
     def events(self) -> list[str]:
         result: list[str] = self.request(SimRequest.EVENTS)

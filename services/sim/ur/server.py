@@ -197,10 +197,7 @@ class URSimServer:
 
     async def __aenter__(self) -> URSimServer:
         try:
-            self._servers.append(await asyncio.start_server(self._rtde, self.host, self.ports.rtde))
-            self._servers.append(await asyncio.start_server(self._dashboard, self.host, self.ports.dashboard))
-            for port in self.ports.script:
-                self._servers.append(await asyncio.start_server(self._script, self.host, port))
+            await self._listen()
         except BaseException:
             await self.close()
             raise
@@ -216,15 +213,32 @@ class URSimServer:
             with contextlib.suppress(asyncio.CancelledError):
                 await self._clock
             self._clock = None
-        await self.cut_links()
+        await self._drop_connections()
         for s in self._servers:
             s.close()
         for s in self._servers:
             await s.wait_closed()
         self._servers.clear()
 
-    async def cut_links(self) -> None:
-        """Close every client connection (the controller keeps listening): a cable pulled and put back."""
+    async def cut_links(self, outage_s: float = 0.0) -> None:
+        """A cable pulled and put back after ``outage_s`` (wall time: how long the fault is injected):
+        every client connection closed, and no new one accepted until the cable is back."""
+        if outage_s > 0:
+            for s in self._servers:
+                s.close()
+            self._servers.clear()
+        await self._drop_connections()
+        if outage_s > 0:
+            await asyncio.sleep(outage_s)
+            await self._listen()
+
+    async def _listen(self) -> None:
+        self._servers.append(await asyncio.start_server(self._rtde, self.host, self.ports.rtde))
+        self._servers.append(await asyncio.start_server(self._dashboard, self.host, self.ports.dashboard))
+        for port in self.ports.script:
+            self._servers.append(await asyncio.start_server(self._script, self.host, port))
+
+    async def _drop_connections(self) -> None:
         for w in list(self._writers):
             w.close()
         for w in list(self._writers):

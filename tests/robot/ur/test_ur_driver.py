@@ -4,6 +4,7 @@ stop, the e-stop and a pulled cable are reported through it. Waits are on the co
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import AsyncIterator, Iterator
 
 import numpy as np
@@ -177,13 +178,15 @@ async def test_a_pulled_cable_is_reported_and_the_link_comes_back(
     link = driver.client
     assert isinstance(link, URLink)
     epoch = link.link_epoch
-    ur_sim.cut_links()
+    # the cable out for 2 s: connections are refused meanwhile, so nothing can come back before it
+    cable = asyncio.create_task(asyncio.to_thread(ur_sim.cut_links, 2.0))
     with pytest.raises(RobotCommunicationError):
-        for _ in range(2000):  # the loss shows on the next wait; nothing else is judged by time
+        for _ in range(5000):  # the loss shows on the next wait; nothing else is judged by time
             await link.next_feedback()
     assert link.link is not LinkState.UP and link.link_epoch == epoch + 1
     with pytest.raises(RobotCommunicationError):
         await driver.move_joints(driver.joint_positions() + 0.05)
+    await cable
     while link.link is not LinkState.UP:
         try:
             await link.next_feedback(5.0)
