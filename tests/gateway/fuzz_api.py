@@ -130,7 +130,8 @@ class FuzzResult:
 async def run_schemathesis(
     url: str, *, seed: int, max_examples: int, report_dir: Path, extra: list[str] | None = None
 ) -> FuzzResult:
-    """The schemathesis CLI against ``url``: all checks, all phases, authenticated, seeded."""
+    """The schemathesis CLI against ``url``: all checks, all phases, authenticated, seeded.
+    ``report_dir`` absolute (:func:`fresh_dir` makes one): the CLI runs there."""
     args = [
         str(SCHEMATHESIS),
         "--config-file",
@@ -160,7 +161,11 @@ async def run_schemathesis(
     ]
     env = {**os.environ, "SCHEMATHESIS_HOOKS": "", "NO_COLOR": "1"}
     proc = await asyncio.create_subprocess_exec(
-        *args, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT, env=env
+        *args,
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.STDOUT,
+        env=env,
+        cwd=report_dir,  # its example cache (.schemathesis/) goes there, not into the checkout
     )
     out, _ = await proc.communicate()
     return FuzzResult(proc.returncode or 0, out.decode(errors="replace"), summarise(report_dir))
@@ -182,7 +187,7 @@ def summarise(report_dir: Path) -> dict[str, Any]:
 
 
 def fresh_dir(path: str) -> Path:
-    d = Path(path)
+    d = Path(path).resolve()
     d.mkdir(parents=True, exist_ok=True)
     for old in d.glob("*.ndjson"):
         old.unlink()
