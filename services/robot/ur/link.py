@@ -45,10 +45,10 @@ from services.common.settings.robot import ReconnectSettings
 from services.dobot import RobotMode
 from services.kinematics.robot_models import RobotSpec
 from services.robot.client import ClientState, FeedbackState, LinkState
-from services.robot.link import FeedbackListener
 from services.robot.ur import rtde_api
 from services.robot.ur.feedback import URSample, describe, to_feedback
 from services.robot.ur.io_client import RTDEOutputs
+from services.robot.ur.stream import FeedbackStream
 
 log = logging.getLogger("pickplace.robot.ur")
 
@@ -60,7 +60,6 @@ STOP_DECEL_RAD_S2 = 4.0
 TOOL_SPEED_MAX_M_S = 1.0  # what a 100 % MovL ratio asks of the tool
 TOOL_ACC_MAX_M_S2 = 2.5
 ENABLE_TIMEOUT_S = 30.0  # controller time for power on + brake release (a real arm takes ~15 s)
-WALL_GUARD_MIN_S = 30.0  # a controller-clock wait also ends after this much wall time
 
 
 REFUSAL_SETTLE_S = 0.1  # controller time for the receive stream to show why a command was refused
@@ -77,7 +76,7 @@ class _Servo:
     t_s: float
 
 
-class URLink:
+class URLink(FeedbackStream):
     def __init__(
         self,
         host: str,
@@ -88,26 +87,18 @@ class URLink:
         reconnect: ReconnectSettings | None = None,
         frequency_hz: float = 500.0,
     ):
-        self.host = host
+        super().__init__(host, feedback_timeout_s)
         self.spec = spec
         self.request_timeout_s = request_timeout_s
-        self.feedback_timeout_s = feedback_timeout_s
         self.reconnect = reconnect or ReconnectSettings()
         self.frequency_hz = frequency_hz
-        self.state = ClientState.IDLE
-        self.link = LinkState.DOWN
-        self.link_epoch = 0
         self._io = rtde_api.Interfaces()
         self._outputs = RTDEOutputs(host)
         self._worker = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix=f"ur-{host}")
         self._loop: asyncio.AbstractEventLoop | None = None
         self._poller: threading.Thread | None = None
         self._poll_stop = threading.Event()
-        self._feedback: FeedbackState | None = None
         self._sample: URSample | None = None
-        self._wake = asyncio.Event()
-        self._wake_error: RobotCommunicationError | None = None
-        self._listeners: list[FeedbackListener] = []
         self._speed_ratio = 100
         self._acc_ratio = 100
         self._next_id = 0
@@ -220,17 +211,8 @@ class URLink:
         )
         if fb.in_error or fb.estop:  # the controller halted: nothing queued here will run
             self._abandon_motion()
-        self._feedback = fb
+        self._publish(fb)
         self._pump_servo(fb)
-        wake, self._wake = self._wake, asyncio.Event()
-        wake.set()
-        for cb in list(self._listeners):
-            cb(fb)
-
-    def _fail_waiters(self, error: RobotCommunicationError) -> None:
-        self._wake_error = error
-        wake, self._wake = self._wake, asyncio.Event()
-        wake.set()
 
     def _lost(self, reason: str) -> None:
         if self.state is ClientState.CLOSED or self.link is not LinkState.UP:
@@ -278,74 +260,6 @@ class URLink:
         self._servo_sent = None
         if self._move is not None:
             self._move = None
-
-    # ------------------------------------------------------------------ ControllerLink: feedback
-    @property
-    def feedback(self) -> FeedbackState | None:
-        return self._feedback
-
-    def add_listener(self, callback: FeedbackListener) -> None:
-        self._listeners.append(callback)
-
-    def remove_listener(self, callback: FeedbackListener) -> None:
-        with contextlib.suppress(ValueError):
-            self._listeners.remove(callback)
-
-    async def next_feedback(self, timeout_s: float | None = None) -> FeedbackState:
-        wake = self._wake
-        try:
-            async with asyncio.timeout(self.feedback_timeout_s if timeout_s is None else timeout_s):
-                await wake.wait()
-        except TimeoutError:
-            raise RobotCommunicationError(
-                f"no RTDE feedback from UR {self.host} (link {self.link.value})"
-            ) from None
-        if self._wake_error is not None and (self._feedback is None or self.link is not LinkState.UP):
-            raise self._wake_error
-        assert self._feedback is not None
-        return self._feedback
-
-    async def wait_feedback(
-        self, predicate: Callable[[FeedbackState], bool], timeout_s: float
-    ) -> FeedbackState:
-        return await self.wait_controller(predicate, timeout_s)
-
-    async def wait_controller(
-        self,
-        predicate: Callable[[FeedbackState], bool],
-        controller_timeout_s: float,
-        *,
-        since_ms: int | None = None,
-        wall_guard_s: float | None = None,
-    ) -> FeedbackState:
-        epoch = self.link_epoch
-        fb = self._feedback if self._feedback is not None else await self.next_feedback()
-        deadline_ms = (fb.timestamp_ms if since_ms is None else since_ms) + controller_timeout_s * 1000.0
-        guard = wall_guard_s if wall_guard_s is not None else WALL_GUARD_MIN_S + 20.0 * controller_timeout_s
-        try:
-            async with asyncio.timeout(guard):
-                while not predicate(fb):
-                    if fb.timestamp_ms >= deadline_ms:
-                        raise TimeoutError(
-                            f"feedback condition not met within {controller_timeout_s:.2f}s of controller time"
-                        )
-                    fb = await self.next_feedback()
-                    if self.link_epoch != epoch:
-                        raise RobotCommunicationError("robot link lost during a controller-clock wait")
-        except TimeoutError as exc:
-            if "controller time" in str(exc):
-                raise
-            raise RobotCommunicationError(
-                f"the UR {self.host} clock did not advance {controller_timeout_s:.2f}s within {guard:.0f}s"
-            ) from None
-        return fb
-
-    async def wait_controller_time(self, duration_s: float, since_ms: int | None = None) -> FeedbackState:
-        fb = self._feedback if self._feedback is not None else await self.next_feedback()
-        until_ms = (fb.timestamp_ms if since_ms is None else since_ms) + duration_s * 1000.0
-        return await self.wait_controller(
-            lambda f: f.timestamp_ms >= until_ms, duration_s + 1.0, since_ms=since_ms
-        )
 
     async def wait_motion_done(self, result_id: int | None, timeout_s: float) -> FeedbackState:
         """Until command ``result_id`` is done and the arm at rest; ``timeout_s`` of controller time."""
