@@ -26,7 +26,7 @@ from pickplace.v1 import robot_pb2
 from rich.console import Console
 from rich.table import Table
 
-from services.common.errors import InvalidInputError
+from services.common.errors import ConfigurationError, InvalidInputError
 from services.common.settings import Settings
 from services.record.replay import (
     Decoder,
@@ -217,9 +217,14 @@ async def run_replay(
     server = None
     if live:
         fs = settings.record.foxglove
-        server = foxglove.start_server(
-            name=f"pickplace replay {path.name}", host=fs.host, port=fs.port, context=ctx
-        )
+        try:
+            server = foxglove.start_server(
+                name=f"pickplace replay {path.name}", host=fs.host, port=fs.port, context=ctx
+            )
+        except RuntimeError as exc:  # the SDK's FoxgloveError: the port is taken (a running cell's view?)
+            raise ConfigurationError(
+                f"cannot serve the replay on {fs.host}:{fs.port}: {exc} (--foxglove-port N, or --no-foxglove)"
+            ) from exc
         out.print(
             f"Foxglove: ws://{fs.host}:{server.port} ({'as fast as possible' if fast else 'recorded speed'})"
         )

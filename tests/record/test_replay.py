@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import numpy as np
@@ -107,3 +108,34 @@ def test_detections_are_matched_by_kind_label_and_distance() -> None:
     changed = compare_detections(recorded, _objs(None, [("red", 0.1), ("green", -0.1)]))
     assert changed.missing == ["rod", "cube blue"] and changed.extra == ["cube green"]
     assert not changed.within(1.0)
+
+
+async def test_replay_on_a_taken_port_says_which_and_what_to_do(tmp_path: Path) -> None:
+    import socket
+
+    from services.apps.record_cli import run_replay
+    from services.common.errors import ConfigurationError
+    from services.common.settings import load_settings
+
+    path = small_recording(tmp_path)
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        s = load_settings(
+            "sim", overrides={"logging": {"file": None}, "record": {"foxglove": {"port": port}}}
+        )
+        with pytest.raises(ConfigurationError, match=f"127.0.0.1:{port}.*--foxglove-port"):
+            await run_replay(s, path, fast=True, detect=False)
+
+
+async def test_replay_at_recorded_speed_plays_every_message(tmp_path: Path) -> None:
+    from rich.console import Console
+
+    from services.apps.record_cli import run_replay
+    from services.common.settings import load_settings
+
+    path = small_recording(tmp_path)  # 2 s of frames: a paced replay sleeps through them
+    s = load_settings("sim", overrides={"logging": {"file": None}, "record": {"foxglove": {"port": 0}}})
+    report = await run_replay(s, path, fast=False, detect=True, out=Console(file=io.StringIO()))
+    assert report.messages == sum(open_recording(path).counts.values()) and report.frames == 3
