@@ -46,6 +46,9 @@ START_TOLERANCE_RAD = np.deg2rad(1.0)  # a trajectory must start this close to t
 # targets queued beyond the lookahead at the end of a trajectory that continues: the controller keeps
 # moving while the next trajectory's request travels (a starved ServoJ queue stops the arm dead)
 CONTINUE_EXTRA_TARGETS = 8
+# a target is sent on feedback no older than this (host clock): after the host stalled, the packets
+# that queued meanwhile are read first (the controller may have run dry in the meantime)
+STALE_FEEDBACK_NS = 20_000_000
 
 
 @dataclass(frozen=True)
@@ -461,6 +464,7 @@ class RobotDriver:
             window += CONTINUE_EXTRA_TARGETS
         ids: list[int | None] = []
         for k, q in enumerate(targets):
+            fresh = False  # a packet that came after the decision to send began
             while True:
                 fb = self.feedback
                 if self._abort.is_set() and not (fb.estop or self._abort_by_estop):
@@ -472,6 +476,15 @@ class RobotDriver:
                     raise ControllerError(
                         f"controller alarm during trajectory step {k}: {text}", alarms=tuple(alarm_ids)
                     )
+                edge = monitor.targets_sent > 0 and monitor.unstarted(fb.current_command_id) == 0
+                if (edge and not fresh) or time.time_ns() - fb.received_ns > STALE_FEEDBACK_NS:
+                    # after a stall, or with nothing left in hand: decide on the arm's state now (the
+                    # controller may have run dry since the packet in hand)
+                    await self.client.next_feedback()
+                    fresh = True
+                    continue
+                if monitor.fault is not None:  # tripped: the monitored run cuts this task, stops the arm
+                    await asyncio.Event().wait()
                 if monitor.unstarted(fb.current_command_id) < window:
                     break
                 await self.client.next_feedback()

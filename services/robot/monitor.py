@@ -204,3 +204,23 @@ class MoveMonitor:
             if self.on_trip is not None:
                 self.on_trip(self.fault)
         return self.fault
+
+
+class ClockRate:
+    """How fast the controller's clock runs against the host's (a simulator at N×, or slowed by a busy
+    machine): from packets at least ``window_s`` of host time apart. 1.0 until there are enough."""
+
+    def __init__(self, window_s: float = 1.0):
+        self.window_s = window_s
+        self._samples: list[tuple[int, int]] = []  # (controller ms, host receipt ns), oldest first
+        self.rate = 1.0
+
+    def on_feedback(self, stamp_ms: int, received_ns: int) -> float:
+        if not self._samples or received_ns - self._samples[-1][1] >= 0.1e9:
+            self._samples.append((stamp_ms, received_ns))
+        while len(self._samples) > 2 and received_ns - self._samples[1][1] >= self.window_s * 1e9:
+            self._samples.pop(0)
+        ms0, ns0 = self._samples[0]
+        if received_ns - ns0 >= self.window_s * 1e9 / 2:
+            self.rate = min(max((stamp_ms - ms0) / ((received_ns - ns0) / 1e6), 0.1), 100.0)
+        return self.rate

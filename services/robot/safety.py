@@ -20,6 +20,7 @@ from services.kinematics.robot_models import RobotSpec
 # the streamed samples of a trajectory timed at exactly its limits may read a hair above them (the
 # servo period cuts a jerk-limited profile); 5 % is far below what an unplanned speed step produces
 ACCELERATION_MARGIN = 1.05
+WIRE_DECIMALS_DEG = 6  # the command codec's precision (services.dobot.fmt_float)
 
 
 @dataclass(frozen=True)
@@ -36,7 +37,10 @@ class SafetyLimits:
         if not np.all(np.isfinite(q)):
             raise InvalidInputError(f"{what} contains NaN or infinite values")
         qs = q.reshape(-1, self.spec.dof)
-        bad = (qs < self.spec.lower - 1e-9) | (qs > self.spec.upper + 1e-9)
+        # as the controller will read it: degrees with 6 decimals on the wire (a target at the limit
+        # must not round to beyond it)
+        qs = np.deg2rad(np.round(np.rad2deg(qs), WIRE_DECIMALS_DEG))
+        bad = (qs < self.spec.lower - 1e-12) | (qs > self.spec.upper + 1e-12)
         if bad.any():
             k, j = (int(x[0]) for x in np.nonzero(bad))
             raise LimitViolationError(
