@@ -77,6 +77,8 @@ def detections_json(msg: vision_pb2.DetectedObjects) -> dict[str, object]:
             "length_m": round(r.length_m, 4),
             "method": r.method,
             "base": vec(r.center_base) if r.has_base else None,
+            "axis": vec(r.axis_base) if r.has_base else None,
+            "diameter_m": round(r.diameter_m, 4),
         }
         for r in msg.rods
     ]

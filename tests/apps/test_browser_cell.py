@@ -72,6 +72,13 @@ async def test_operator_panel_on_pickplace_up(tmp_path):
                 await expect(found.first.locator("td.conf")).to_have_text(
                     re.compile(r"\d+ %|fit \d|recognised|unknown")
                 )
+                # the 3D view shows what vision sees and where the task places things
+                view3d = page.locator("#robot3d")
+                await expect(view3d).to_have_attribute("data-loaded", "true", timeout=30_000)
+                await expect(view3d).to_have_attribute(
+                    "data-objects", re.compile(r"^[1-9]\d*$"), timeout=20_000
+                )
+                await expect(view3d).to_have_attribute("data-targets", re.compile(r"^[1-9]\d*$"))
                 await expect(tid("tcp-pose")).to_have_text(re.compile(r"-?\d+\.\d .*"), timeout=10_000)
                 await expect(tid("wrist-force")).to_have_text(re.compile(r"\d+\.\d"))
                 await expect(tid("gripper")).to_have_text(re.compile(r"^(open|closed)$"))

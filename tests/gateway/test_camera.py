@@ -65,6 +65,8 @@ async def test_colour_depth_views_and_detections(settings, sqlite_db, tmp_path) 
             "length_m": 0.2,
             "method": "",
             "base": [0.45, 0.01, 0.02],
+            "axis": [0.0, 0.0, 0.0],
+            "diameter_m": 0.0,
         }
         assert d["objects"][1]["color"] == "red" and d["objects"][1]["visibility"] == "occluded"
         assert d["objects"][1]["base"] is None  # no base-frame pose without has_base

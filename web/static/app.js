@@ -182,7 +182,7 @@ function applyJoints(js) {
 }
 
 // ---------------------------------------------------------------- camera and detections
-let camView = "overlay", camSeq = 0, camPending = false;
+let camView = "overlay", camSeq = 0, camPending = false, placeTargets = [];
 function refreshCamera() {
   if (camPending) return;
   camPending = true;
@@ -194,6 +194,7 @@ function refreshCamera() {
 }
 function applyDetections(d) {
   model.detections = d;
+  if (robotView) robotView.setDetections(d);
   const mm = (v) => (v ? v.map((x) => (x * 1000).toFixed(0)).join(" ") : "not calibrated");
   const rows = d.objects.map((o) => {
     const conf = o.kind === "rod" ? `${(100 * o.confidence).toFixed(0)} %`
@@ -312,6 +313,12 @@ async function loadConfig() {
     $("cell-id").textContent = `· ${data.cell_id} · ${data.robot.model}`;
     $("speed-range").value = data.robot.speed_ratio;
     $("speed-value").textContent = `${data.robot.speed_ratio} %`;
+    const scene = data.sim && data.sim.twin && data.sim.twin.scene;
+    if (scene) { // the place targets: where the rod is stood, where each cube colour goes
+      placeTargets = [[...scene.rod_place_m, "white"],
+        ...Object.entries(scene.drop_zones_m || {}).map(([c, xy]) => [...xy, c])];
+      if (robotView) robotView.setTargets(placeTargets);
+    }
   } catch { /* shown by status */ }
 }
 
@@ -353,6 +360,10 @@ async function main() {
   setInterval(render, 1000); // a task that stops reporting goes stale even without new messages
   setInterval(() => { if (camView !== "overlay") { camSeq++; refreshCamera(); } }, 1000);
   robotView = await createRobotView($("robot3d"), `${API}/robot/urdf`);
+  if (robotView) {
+    robotView.setTargets(placeTargets);
+    if (model.detections) robotView.setDetections(model.detections);
+  }
 }
 
 main();

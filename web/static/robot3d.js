@@ -74,9 +74,60 @@ export async function createRobotView(container, urdfUrl) {
   requestAnimationFrame(render);
   container.dataset.loaded = "true";
 
+  // what vision sees (base frame, as the detection list): the table, rods, cubes, obstacle boxes;
+  // and where the task puts things (the place targets from the settings)
+  const table = new THREE.Mesh(new THREE.PlaneGeometry(0.9, 1.3),
+    new THREE.MeshStandardMaterial({ color: 0x5a5048, roughness: 0.9, transparent: true, opacity: 0.85 }));
+  table.position.set(0.5, 0.0, -0.001);
+  world.add(table);
+  const objects = new THREE.Group(), targets = new THREE.Group();
+  world.add(objects, targets);
+  const COLOR = { red: 0xe5534b, green: 0x3fb950, blue: 0x4493f8, yellow: 0xe3b341, black: 0x222222 };
+  const clear = (g) => { while (g.children.length) { const c = g.children.pop(); c.geometry?.dispose(); } };
+  const up = new THREE.Vector3(0, 1, 0);
+  let shown = 0;
+
   return {
     setJoints(names, positions) {
       names.forEach((n, k) => { if (robot.joints[n]) robot.joints[n].setJointValue(positions[k]); });
+      dirty = true;
+    },
+    setDetections(d) {
+      clear(objects);
+      for (const o of d.objects) {
+        if (!o.base) continue;
+        let mesh;
+        if (o.kind === "rod") {
+          mesh = new THREE.Mesh(new THREE.CylinderGeometry((o.diameter_m || 0.02) / 2, (o.diameter_m || 0.02) / 2, o.length_m || 0.2, 16),
+            new THREE.MeshStandardMaterial({ color: 0x30363d, metalness: 0.8, roughness: 0.3 }));
+          mesh.position.set(...o.base);
+          if (o.axis && Math.hypot(...o.axis) > 0.5) mesh.quaternion.setFromUnitVectors(up, new THREE.Vector3(...o.axis).normalize());
+        } else if (o.kind === "cube") {
+          mesh = new THREE.Mesh(new THREE.BoxGeometry(0.05, 0.05, 0.05),
+            new THREE.MeshStandardMaterial({ color: COLOR[o.color] ?? 0x8b96a5 }));
+          mesh.position.set(...o.base);
+        } else {
+          const [lo, hi] = o.base;
+          const size = hi.map((h, i) => Math.max(h - lo[i], 0.005));
+          mesh = new THREE.Mesh(new THREE.BoxGeometry(...size),
+            new THREE.MeshStandardMaterial({ color: COLOR[o.color] ?? 0xdb61a2, transparent: true, opacity: 0.35 }));
+          mesh.position.set(...lo.map((l, i) => l + size[i] / 2));
+        }
+        objects.add(mesh);
+      }
+      shown = objects.children.length;
+      container.dataset.objects = String(shown);
+      dirty = true;
+    },
+    setTargets(points) { // [[x, y, colour]] on the table
+      clear(targets);
+      for (const [x, y, c] of points) {
+        const ring = new THREE.Mesh(new THREE.RingGeometry(0.025, 0.035, 32),
+          new THREE.MeshBasicMaterial({ color: COLOR[c] ?? 0xffffff, side: THREE.DoubleSide }));
+        ring.position.set(x, y, 0.002);
+        targets.add(ring);
+      }
+      container.dataset.targets = String(targets.children.length);
       dirty = true;
     },
   };
