@@ -25,7 +25,8 @@ class GraspGripperSettings(Model):
     palm_height_m: float = Field(0.07, gt=0, le=0.5, description="palm box above the fingers")
     width_margin_m: float = Field(0.01, ge=0, le=0.1, description="opening kept beyond the object width")
     min_width_m: float = Field(0.004, ge=0, le=0.2)
-    table_clearance_m: float = Field(0.002, ge=0, le=0.05, description="fingertips above the table")
+    # 4 mm: the seen rod height (and with it the table) is good to a few mm (randomized camera pose)
+    table_clearance_m: float = Field(0.004, ge=0, le=0.05, description="fingertips above the table")
     grip_force_n: float = Field(10.0, gt=0, le=500, description="target squeeze per finger")
 
 
