@@ -53,7 +53,9 @@ log = logging.getLogger("pickplace.cli")
 
 ProfileOpt = Annotated[str | None, typer.Option("--profile", "-p", help="config profile (sim, nova5-real)")]
 ConfigOpt = Annotated[str | None, typer.Option("--config", "-c", help="extra YAML config file")]
-FoxglovePortOpt = Annotated[int | None, typer.Option("--foxglove-port", help="Foxglove live view port (8765)")]
+FoxglovePortOpt = Annotated[
+    int | None, typer.Option("--foxglove-port", help="Foxglove live view port (8765)")
+]
 NoFoxgloveOpt = Annotated[bool, typer.Option("--no-foxglove", help="no Foxglove live view")]
 RecordOpt = Annotated[str | None, typer.Option("--record", help="record MCAP files under this directory")]
 
@@ -244,14 +246,14 @@ def serve(
     service: Annotated[str, typer.Argument(help="service to run: " + " | ".join(SERVICES))],
     profile: ProfileOpt = None,
     config: ConfigOpt = None,
+    foxglove_port: FoxglovePortOpt = None,
+    no_foxglove: NoFoxgloveOpt = False,
+    record: RecordOpt = None,
 ) -> None:
     """Run one service in this process (what docker-compose and Kubernetes run)."""
     if service not in SERVICES:
         console.print(f"[red]unknown service {service!r}[/red]; available: {', '.join(SERVICES)}")
         raise typer.Exit(2)
-    foxglove_port: FoxglovePortOpt = None,
-    no_foxglove: NoFoxgloveOpt = False,
-    record: RecordOpt = None,
     s = _settings(profile, config, record=record_overrides(foxglove_port, no_foxglove, record))
     from services.apps.probes import start_metrics_exporter
 
