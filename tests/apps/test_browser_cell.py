@@ -140,9 +140,14 @@ async def test_operator_panel_on_pickplace_up(tmp_path):
                 await expect(tid("robot-mode")).to_have_class(re.compile(r"\bok\b"), timeout=20_000)
                 await expect(tid("robot-mode")).not_to_have_text("E-STOP")
                 # (the task still reports ESTOP until it is started again: the header says so too)
+                picks = tid("history").locator("tr.ok, tr.fail")
+                before = await picks.count()
                 await page.get_by_role("button", name="start the task").click()
                 await expect(tid("state")).to_have_text(RUNNING_STATE, timeout=30_000)
                 await expect(tid("events")).to_contain_text("e-stop released")
+                # picking resumed: the next cycle runs to an outcome (the rod stands now, so vision
+                # may find none: a failed pick is an outcome too) and it reaches the history
+                await expect(picks).to_have_count(before + 1, timeout=90_000)
                 assert not run.done()
 
                 # the live link drops: everything greys out with "stale since", and recovers by itself
