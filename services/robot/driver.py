@@ -35,8 +35,9 @@ from services.kinematics.trajectory import JointTrajectory
 from services.robot.client import FeedbackState, LinkState
 from services.robot.gripper import DigitalOutputGripper, GripperState
 from services.robot.link import ControllerLink
-from services.robot.monitor import MoveMonitor, StreamMonitor, goal_deviation
+from services.robot.monitor import ClockRate, MoveMonitor, StreamMonitor
 from services.robot.safety import SafetyLimits
+from services.robot.supervision import Supervision
 
 log = logging.getLogger("pickplace.robot.driver")
 
@@ -62,7 +63,7 @@ class MoveResult:
 StopCondition = Callable[[FeedbackState], bool]
 
 
-class RobotDriver:
+class RobotDriver(Supervision):
     def __init__(
         self,
         client: ControllerLink,
@@ -94,6 +95,9 @@ class RobotDriver:
         self.monitor_trips = 0  # motions stopped for leaving their path or missing their goal
         self.last_fault: ExecutionError | None = None
         self.last_fault_stamp_ms: int | None = None  # the packet that tripped it (controller clock)
+        # the look-ahead covers the host's latency, which is wall time: a controller clock that runs N×
+        # faster (a simulator) needs N× the targets in hand
+        self.clock_rate = ClockRate()
 
     async def start(self) -> None:
         self.client.add_listener(self._on_feedback)
@@ -183,97 +187,6 @@ class RobotDriver:
         self._gap_task = None
         if isinstance(self._monitor, StreamMonitor) and not self._motion_lock.locked():
             self._monitor = None
-
-    # ------------------------------------------------------------------ monitoring
-    def _on_feedback(self, fb: FeedbackState) -> None:
-        monitor = self._monitor
-        if monitor is not None and monitor.fault is None and monitor.on_feedback(fb) is not None:
-            self.last_fault = monitor.fault
-            self.last_fault_stamp_ms = fb.timestamp_ms
-            self._tripped.set()
-
-    def _watch(self, monitor: StreamMonitor | MoveMonitor) -> None:
-        self._tripped.clear()
-        self._monitor = monitor
-
-    async def _monitored(self, work: Awaitable[T], what: str) -> T:
-        """Run ``work`` while the monitor watches; when it trips, cut ``work``, stop the arm, raise."""
-        task: asyncio.Task[T] = asyncio.ensure_future(work)
-        trip = asyncio.ensure_future(self._tripped.wait())
-        try:
-            await asyncio.wait({task, trip}, return_when=asyncio.FIRST_COMPLETED)
-            if task.done():
-                return task.result()
-            task.cancel()
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await task
-            raise await self._stop_for_fault(what)
-        finally:
-            trip.cancel()
-            if not task.done():
-                task.cancel()
-
-    async def _stop_for_fault(self, what: str) -> ExecutionError:
-        """The monitor tripped: stop the arm, count it, and return the error to raise."""
-        fault = self.last_fault or ExecutionError(f"{what}: execution monitor tripped")
-        self._continue_from = self._continue_tail = None
-        self._monitor = None
-        log.error("%s: %s", what, fault)
-        await self._send_stop(what)
-        if "watchdog" in str(fault):
-            self.watchdog_trips += 1
-        else:
-            self.monitor_trips += 1
-        return fault
-
-    async def _send_stop(self, why: str) -> None:
-        """Stop the controller's queue, even while the caller is being cancelled."""
-        stop = asyncio.ensure_future(self.client.stop())
-        stop.add_done_callback(_retrieve)  # finished after a cancelled caller: its outcome is logged
-        try:
-            await asyncio.shield(stop)
-        except asyncio.CancelledError:
-            raise
-        except Exception as exc:  # the arm's own alarm or a lost link: the link owes the Stop then
-            log.warning("Stop after %s not confirmed: %s", why, exc)
-
-    async def _end_gap_watch(self, handle_trip: bool = True) -> None:
-        """A continuation's successor has come (or the driver closes): end the gap's watch; if it
-        tripped meanwhile, the arm has been (or now is) stopped and nothing continues."""
-        task, self._gap_task = self._gap_task, None
-        if task is None:
-            return
-        if not task.done() and (not handle_trip or not self._tripped.is_set()):
-            task.cancel()  # not tripped: nothing to do (a tripped watch is let finish its Stop)
-        await asyncio.wait({task})
-
-    async def _watch_gap(self) -> None:
-        """After a continuing trajectory: if the next one does not come before the controller runs dry
-        (plus the watchdog margin), stop the arm; the next trajectory is then judged from rest."""
-        await self._tripped.wait()
-        await self._stop_for_fault("the gap after a continuing trajectory")
-
-    async def _check_goal(self, goal: np.ndarray, what: str) -> FeedbackState:
-        """The goal check: the measured joints within the goal tolerance of ``goal`` within
-        ``goal_settle_s`` of controller time; else the arm is stopped and ExecutionError raised."""
-        r = self.settings.robot
-        tol = r.goal_tolerance_rad
-        try:
-            return await self.client.wait_controller(
-                lambda f: abs(goal_deviation(f.q, goal).rad) <= tol, r.goal_settle_s
-            )
-        except TimeoutError:
-            fb = self.feedback
-            dev = goal_deviation(fb.q, goal)
-            self.monitor_trips += 1
-            self.last_fault = ExecutionError(
-                f"execution monitor: {what} ended with {dev.describe()} its goal after "
-                f"{r.goal_settle_s:.2f} s (goal tolerance {np.rad2deg(tol):.2f}°); arm stopped"
-            )
-            self.last_fault_stamp_ms = fb.timestamp_ms
-            log.error("%s", self.last_fault)
-            await self._send_stop(what)
-            raise self.last_fault from None
 
     # ------------------------------------------------------------------ motion
     async def _with_retries(self, what: str, step: Callable[[], Awaitable[T]]) -> tuple[T, int]:
@@ -462,6 +375,7 @@ class RobotDriver:
         window = self.settings.robot.servo_lookahead
         if not wait_done:  # the next trajectory's request comes in while these run: more in hand
             window += CONTINUE_EXTRA_TARGETS
+        window = max(window, round(window * self.clock_rate.rate))
         ids: list[int | None] = []
         for k, q in enumerate(targets):
             fresh = False  # a packet that came after the decision to send began
@@ -559,8 +473,3 @@ class RobotDriver:
     # ------------------------------------------------------------------ gripper
     async def set_gripper(self, close: bool) -> GripperState:
         return await (self.gripper.close() if close else self.gripper.open())
-
-
-def _retrieve(task: asyncio.Future[None]) -> None:
-    if not task.cancelled() and task.exception() is not None:
-        log.warning("Stop not confirmed: %s", task.exception())

@@ -141,3 +141,17 @@ def test_starvation_needs_both_clocks_so_a_fast_simulator_is_not_a_stalled_host(
     m2.on_feedback(_Fb(0, 1, np.zeros(6)))  # type: ignore[arg-type]
     wall[0] = 100.0
     assert m2.on_feedback(_Fb(100_000, 1, np.zeros(6), RobotMode.ENABLE)) is None  # type: ignore[arg-type]
+
+
+def test_the_clock_rate_is_the_controllers_time_per_host_time():
+    from services.robot.monitor import ClockRate
+
+    r = ClockRate(window_s=1.0)
+    assert r.on_feedback(0, 0) == 1.0  # not enough yet
+    for k in range(1, 40):  # a controller slowed to 0.4×: 8 ms of its time per 20 ms of the host
+        rate = r.on_feedback(8 * k, 20_000_000 * k)
+    assert abs(rate - 0.4) < 1e-9
+    r2 = ClockRate(window_s=1.0)
+    for k in range(0, 100):
+        rate = r2.on_feedback(32 * k, 8_000_000 * k)
+    assert abs(rate - 4.0) < 1e-9
