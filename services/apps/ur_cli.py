@@ -26,6 +26,11 @@ class URModel(enum.StrEnum):
     UR3 = "ur3"
 
 
+class Engine(enum.StrEnum):
+    KINEMATIC = "kinematic"  # the reference followed exactly
+    TWIN = "twin"  # the MuJoCo cell: scene, camera, gripper on the tool outputs
+
+
 @app.command("sim-ur")
 def sim_ur(
     model: Annotated[URModel | None, typer.Option(help="arm model (default: robot.model when a UR)")] = None,
@@ -39,6 +44,8 @@ def sim_ur(
     unlock_delay_s: Annotated[float, typer.Option(min=0, help="protective stop unlock delay")] = 5.0,
     rtde_port: Annotated[int, typer.Option(min=1, max=65535)] = 30004,
     dashboard_port: Annotated[int, typer.Option(min=1, max=65535)] = 29999,
+    engine: Annotated[Engine, typer.Option(help="motion engine behind the controller")] = Engine.KINEMATIC,
+    seed: Annotated[int | None, typer.Option(help="twin scene seed (default sim.seed)")] = None,
     profile: Annotated[str | None, typer.Option("--profile", "-p", help="config profile")] = None,
 ) -> None:
     """Run a simulated UR5e/UR3 controller that ur_rtde drives like a real one, until Ctrl-C."""
@@ -59,8 +66,17 @@ def sim_ur(
     except ValueError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2) from exc
-    config = URControllerConfig(start_powered=powered, unlock_delay_s=unlock_delay_s)
-    controller = URController(get_robot(name), config)
+    twin = None
+    q0 = URControllerConfig().q0
+    if engine is Engine.TWIN:
+        import numpy as np
+
+        from services.sim.twin.ur_cell import create_ur_twin_engine
+
+        twin = create_ur_twin_engine(settings, name, seed)
+        q0 = tuple(float(v) for v in np.deg2rad(settings.sim.twin.initial_joints_deg))
+    config = URControllerConfig(start_powered=powered, unlock_delay_s=unlock_delay_s, q0=q0)
+    controller = URController(get_robot(name), config, twin)
 
     async def main() -> None:
         async with URSimServer(controller, address, URPorts(rtde_port, dashboard_port), speed):

@@ -62,6 +62,7 @@ TOOL_ACC_MAX_M_S2 = 2.5
 ENABLE_TIMEOUT_S = 30.0  # controller time for power on + brake release (a real arm takes ~15 s)
 
 
+RUNNING_WORDS = "Robotmode: RUNNING"  # the dashboard's answer once the brakes are released
 REFUSAL_SETTLE_S = 0.1  # controller time for the receive stream to show why a command was refused
 
 
@@ -299,9 +300,18 @@ class URLink(FeedbackStream):
             raise EmergencyStopError("the robot's emergency stop is active")
         await self._call("power on", lambda: self._io.dashboard("power on"))
         await self._call("brake release", lambda: self._io.dashboard("brake release"))
-        await self.wait_controller(
-            lambda f: self._sample is not None and self._sample.robot_mode == 7, ENABLE_TIMEOUT_S
-        )
+        # the dashboard answers with the controller's state now; the newest RTDE sample may predate
+        # the commands (a power off just sent still shows RUNNING there)
+        fb = self._feedback if self._feedback is not None else await self.next_feedback()
+        deadline_ms = fb.timestamp_ms + ENABLE_TIMEOUT_S * 1000.0
+        while (
+            mode := await self._call("robotmode", lambda: self._io.dashboard("robotmode"))
+        ) != RUNNING_WORDS:
+            fb = await self.next_feedback()
+            if fb.timestamp_ms > deadline_ms:
+                raise ControllerError(
+                    f"UR {self.host} not ready {ENABLE_TIMEOUT_S:.0f}s after brake release: {mode}"
+                )
         await self._ensure_control()
         if load_kg > 0:
             await self._call(

@@ -34,6 +34,7 @@ TICK_S = 0.002  # the e-Series control cycle
 CONTROLLER_VERSION = (5, 11, 1, 108318)
 POLYSCOPE_VERSION = "URSoftware 5.11.1.108318 (Nov 03 2021)"
 SERIAL_NUMBER = "20235500001"
+ENGINE_TOOL_DO_SHIFT = 32  # services.sim.twin.engine.TOOL_DO_SHIFT (not imported: it pulls in MuJoCo)
 
 
 @dataclass
@@ -109,7 +110,7 @@ class URController:
 
     def power_off(self) -> None:
         self.stop_program("power off")
-        self.arm.halt()
+        self._halt()
         self.robot_mode = URRobotMode.POWER_OFF
         self._mode_target = self._mode_change_at = None
 
@@ -125,8 +126,14 @@ class URController:
             self._mode_change_at = start + self.config.brake_release_s
 
     # ------------------------------------------------------------------ safety
-    def protective_stop(self, reason: str) -> None:
+    def _halt(self) -> None:
+        """Standstill where the arm is (the measured joints: a twin's lag behind the reference)."""
         self.arm.halt()
+        self.arm.ref.q = self.q.copy()
+        self.engine.hold()
+
+    def protective_stop(self, reason: str) -> None:
+        self._halt()
         self.safety_mode = SafetyMode.PROTECTIVE_STOP
         self.protective_stop_at = self.timestamp_s
         self.note(f"Protective stop: {reason}")
@@ -242,7 +249,10 @@ class URController:
         st = self.engine.step(dt, r.q, r.qd, r.qdd)
         self.q, self.qd = st.q, st.qd
         self.digital_inputs = st.digital_inputs
-        self.engine.set_digital_outputs(self.digital_outputs)
+        # the engines' convention (the Dobot's): cabinet outputs from bit 0, the flange's from bit 32
+        self.engine.set_digital_outputs(
+            self.standard_do | (self.configurable_do << 8) | ((self.tool_do & 0b11) << ENGINE_TOOL_DO_SHIFT)
+        )
 
     # ------------------------------------------------------------------ RTDE outputs
     def outputs(self, names: Iterable[str] = ()) -> dict[str, Any]:

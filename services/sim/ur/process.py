@@ -17,6 +17,8 @@ import threading
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from services.sim.ur.controller import URControllerConfig
 
 START_TIMEOUT_S = 30.0  # a spawned interpreter imports numpy, scipy and the kinematics first
@@ -40,6 +42,8 @@ class SimSpec:
     rtde_port: int = 30004
     dashboard_port: int = 29999
     script_ports: tuple[int, ...] = (30001, 30002, 30003)
+    twin: bool = False  # the MuJoCo twin of the cell behind the controller (else the kinematic engine)
+    seed: int | None = None  # the twin's scene
 
 
 def _child(spec: SimSpec, conn: multiprocessing.connection.Connection) -> None:
@@ -53,7 +57,19 @@ async def _serve(spec: SimSpec, conn: multiprocessing.connection.Connection) -> 
 
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
-    controller = URController(get_robot(spec.model), spec.config)
+    engine = None
+    config = spec.config or URControllerConfig()
+    if spec.twin:
+        from services.common.settings import load_settings
+        from services.sim.twin.ur_cell import create_ur_twin_engine
+
+        settings = load_settings("sim")
+        engine = create_ur_twin_engine(settings, spec.model, spec.seed)
+        if spec.config is None:  # start where the twin's arm stands
+            config = URControllerConfig(
+                q0=tuple(float(v) for v in np.deg2rad(settings.sim.twin.initial_joints_deg))
+            )
+    controller = URController(get_robot(spec.model), config, engine)
     ports = URPorts(spec.rtde_port, spec.dashboard_port, spec.script_ports)
     try:
         server = URSimServer(controller, spec.host, ports, spec.speed)

@@ -351,4 +351,8 @@ class URSimServer:
             "robot_mode": c.robot_mode,
             "safety_mode": c.safety_mode,
             "runtime_state": c.runtime_state,
+            "digital_outputs": c.digital_outputs,
+            # the twin's jaws, when a twin is behind the controller
+            "gripper_closed": getattr(c.engine, "gripper_closed", None),
+            "gripper_opening_m": getattr(c.engine, "gripper_opening_m", None),
         }
