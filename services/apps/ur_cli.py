@@ -9,13 +9,17 @@ from __future__ import annotations
 import asyncio
 import enum
 import logging
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from services.common.aio import run_until_signal
 from services.common.logs import setup_logging
-from services.common.settings import load_settings
+from services.common.settings import Settings, load_settings
+from services.common.settings.robot import RobotDriverKind
+
+if TYPE_CHECKING:
+    from services.robot.demo_cycle import CycleReport
 
 app = typer.Typer(help="Simulated Universal Robots controller.", no_args_is_help=True)
 log = logging.getLogger("pickplace.sim.ur")
@@ -94,5 +98,47 @@ def sim_ur(
         raise typer.Exit(1) from exc
 
 
-if __name__ == "__main__":  # ``python -m services.apps.ur_cli --host …``: sim-ur without the whole CLI
+async def run_ur_keypose(settings: Settings, cycles: int, twin: bool) -> CycleReport:
+    """Seed 003's key-pose cycle on a simulated UR (its own process) through the shared driver."""
+    from services.robot.demo_cycle import run_keypose_cycle
+    from services.robot.service import build_driver
+    from services.sim.ur.process import SimSpec, URSimProcess
+    from services.sim.ur.server import free_loopback_host
+
+    spec = SimSpec(settings.robot.model, free_loopback_host(), twin=twin, seed=settings.sim.seed)
+    with URSimProcess(spec) as sim:
+        robot = settings.robot.model_copy(update={"host": sim.host})
+        driver = build_driver(settings.model_copy(update={"robot": robot}))
+        try:
+            await driver.start()
+            await driver.enable()
+            return await run_keypose_cycle(driver, settings.cycle, cycles, settings.robot.speed_ratio)
+        finally:
+            await driver.client.close()
+
+
+@app.command("ur-keypose")
+def ur_keypose(
+    cycles: Annotated[int, typer.Option(min=1, max=1000)] = 1,
+    engine: Annotated[Engine, typer.Option(help="motion engine behind the controller")] = Engine.KINEMATIC,
+    profile: Annotated[str | None, typer.Option("--profile", "-p", help="config profile")] = None,
+    config: Annotated[
+        str | None, typer.Option("--config", "-c", help="extra YAML (config/robots/ur3-keypose.yaml)")
+    ] = None,
+) -> None:
+    """Run seed 003's key-pose cycle on a simulated UR through ur_rtde and the shared RobotDriver."""
+    settings = load_settings(profile, config)
+    if settings.robot.driver is not RobotDriverKind.UR_RTDE:
+        typer.echo("error: robot.driver must be ur_rtde (e.g. -c config/robots/ur3-keypose.yaml)", err=True)
+        raise typer.Exit(2)
+    setup_logging(settings.logging)
+    report = asyncio.run(run_ur_keypose(settings, cycles, engine is Engine.TWIN))
+    times = ", ".join(f"{t:.2f}" for t in report.cycle_times_s)
+    typer.echo(
+        f"{settings.robot.model}: {report.cycles} cycle(s), {report.moves} moves, cycle times {times} s, "
+        f"largest final position error {report.max_position_error_deg:.4f}°"
+    )
+
+
+if __name__ == "__main__":  # ``python -m services.apps.ur_cli sim-ur …``: without the whole CLI
     app()

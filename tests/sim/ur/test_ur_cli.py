@@ -6,17 +6,21 @@ import signal
 import socket
 import subprocess
 import sys
+from pathlib import Path
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
 from services.apps.cli import app
+from services.common.settings import load_settings
 from services.rtde import codec
 from services.rtde.codes import MessageType
 from services.sim.ur.server import free_loopback_host
 
 pytestmark = pytest.mark.integration
 
+ROOT = Path(__file__).resolve().parents[3]
 START_TIMEOUT_S = 60.0  # a cold interpreter imports numpy, scipy and the kinematics first
 
 
@@ -29,7 +33,17 @@ def test_sim_ur_refuses_a_non_loopback_address() -> None:
 def test_sim_ur_serves_rtde_and_the_dashboard_until_interrupted() -> None:
     host = free_loopback_host()
     proc = subprocess.Popen(
-        [sys.executable, "-m", "services.apps.ur_cli", "--host", host, "--powered", "--model", "ur3"],
+        [
+            sys.executable,
+            "-m",
+            "services.apps.ur_cli",
+            "sim-ur",
+            "--host",
+            host,
+            "--powered",
+            "--model",
+            "ur3",
+        ],
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
@@ -58,3 +72,22 @@ def test_sim_ur_serves_rtde_and_the_dashboard_until_interrupted() -> None:
         finally:
             if proc.poll() is None:
                 proc.kill()
+
+
+async def test_ur_keypose_runs_seed_003s_cycle_through_the_shared_driver(tmp_path: Path) -> None:
+    from services.apps.ur_cli import run_ur_keypose
+
+    settings = load_settings(
+        "sim",
+        config_file=ROOT / "config" / "robots" / "ur3-keypose.yaml",
+        overrides={
+            "cycle": {"move_duration_s": 0.4, "dwell_s": 0.0},
+            "logging": {"file": str(tmp_path / "log")},
+        },
+    )
+    assert (
+        settings.robot.model == "ur3" and settings.cycle.poses_deg["home"][1] == -89.9544
+    )  # seed 003's -1.57 rad
+    report = await run_ur_keypose(settings, cycles=1, twin=False)
+    assert report.cycles == 1 and report.moves == len(settings.cycle.sequence)
+    assert report.max_position_error_deg < np.rad2deg(1e-3)  # every key pose reached within 1 mrad
