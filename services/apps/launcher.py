@@ -310,6 +310,22 @@ class Launcher:
 
 
 # ---------------------------------------------------------------------------- state and session log
+def with_state_dir(settings: Settings) -> Settings:
+    """The cell's files in its own state directory (``state.dir``, default var/<cell_id>) where the
+    settings leave them at their shared defaults: the SQLite database and the gateway's spill file.
+    A configured path is kept. Two cells on one checkout share neither."""
+    from services.common.settings import DatabaseSettings
+    from services.common.settings.gateway import GatewaySettings
+
+    state = settings.state.path(settings.cell_id, REPO_ROOT)
+    gw, db = settings.gateway, settings.database
+    if gw.pick_spill_file == GatewaySettings.model_fields["pick_spill_file"].default:
+        gw = gw.model_copy(update={"pick_spill_file": str(state / "gateway" / "pick_spill.jsonl")})
+    if db.url == DatabaseSettings.model_fields["url"].default:
+        db = db.model_copy(update={"url": f"sqlite+aiosqlite:///{state / 'pickplace.db'}"})
+    return settings.model_copy(update={"gateway": gw, "database": db})
+
+
 def session_log_path(settings: Settings, started: datetime, kind: str) -> Path:
     """``session-<kind>-<UTC start>.log`` beside the rotating main log (or in the state directory's
     log/ when there is no main log file)."""
@@ -364,6 +380,7 @@ async def run_processes(
     console = console or Console()
     ports = ports or LocalPorts.from_settings(settings)
     token = settings.gateway.api_token.get_secret_value() if settings.gateway.api_token else generate_token()
+    settings = with_state_dir(settings)
     var = settings.state.path(settings.cell_id, REPO_ROOT)  # this cell's own: never another cell's files
     specs = topology(
         settings,

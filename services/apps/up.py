@@ -79,19 +79,6 @@ def _status_table(runner, started: float, last: PickOutcome | None) -> Group:  #
     return Group(*lines)
 
 
-def with_state_dir(settings: Settings) -> Settings:
-    """The gateway's spill file in this cell's state directory (``state.dir``, default var/<cell_id>)
-    unless one was configured: two cells on one checkout never share it."""
-    from services.common.settings import REPO_ROOT
-    from services.common.settings.gateway import GatewaySettings
-
-    gw = settings.gateway
-    if gw.pick_spill_file != GatewaySettings.model_fields["pick_spill_file"].default:
-        return settings
-    spill = settings.state.path(settings.cell_id, REPO_ROOT) / "gateway" / "pick_spill.jsonl"
-    return settings.model_copy(update={"gateway": gw.model_copy(update={"pick_spill_file": str(spill)})})
-
-
 @contextlib.asynccontextmanager
 async def aio_session(cm: contextlib.AbstractContextManager[object]) -> AsyncIterator[object]:
     with cm as value:
@@ -116,7 +103,7 @@ async def run_pick_cell(
     started = time.perf_counter()
     last: list[PickOutcome] = []
     from gateway.server import embedded_gateway
-    from services.apps.launcher import session_log
+    from services.apps.launcher import session_log, with_state_dir
 
     settings = with_state_dir(settings)
     async with (

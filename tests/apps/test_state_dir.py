@@ -6,8 +6,7 @@ import logging
 from datetime import UTC, datetime
 from pathlib import Path
 
-from services.apps.launcher import session_log, session_log_path
-from services.apps.up import with_state_dir
+from services.apps.launcher import session_log, session_log_path, with_state_dir
 from services.common.settings import REPO_ROOT, load_settings
 
 
@@ -22,12 +21,15 @@ def test_the_state_directory_is_the_cells_own(tmp_path: Path) -> None:
     assert d.state.path(d.cell_id, REPO_ROOT) == REPO_ROOT / "run" / "x"
 
 
-def test_the_embedded_cell_spills_picks_into_its_state_directory(tmp_path: Path) -> None:
+def test_a_cells_database_and_spill_file_are_in_its_state_directory(tmp_path: Path) -> None:
     s = with_state_dir(load_settings("sim", overrides={"cell_id": "bay2"}))
     assert s.gateway.pick_spill_file == str(REPO_ROOT / "var" / "bay2" / "gateway" / "pick_spill.jsonl")
-    mine = str(tmp_path / "spill.jsonl")
-    s = with_state_dir(load_settings("sim", overrides={"gateway": {"pick_spill_file": mine}}))
-    assert s.gateway.pick_spill_file == mine  # a configured file is kept
+    assert s.database.url == f"sqlite+aiosqlite:///{REPO_ROOT / 'var' / 'bay2' / 'pickplace.db'}"
+    mine, db = str(tmp_path / "spill.jsonl"), f"sqlite+aiosqlite:///{tmp_path / 'mine.db'}"
+    s = with_state_dir(
+        load_settings("sim", overrides={"gateway": {"pick_spill_file": mine}, "database": {"url": db}})
+    )
+    assert s.gateway.pick_spill_file == mine and s.database.url == db  # configured paths are kept
 
 
 def test_a_session_log_per_run_named_by_its_start_beside_the_main_log(tmp_path: Path) -> None:
