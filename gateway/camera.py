@@ -12,7 +12,7 @@ from pickplace.v1 import vision_pb2
 from services.common.errors import InvalidInputError
 from services.common.sensors import RGBDFrame
 
-DEPTH_RANGE_M = (0.2, 2.0)  # the colour map's span: near table top to the floor behind it
+DEPTH_RANGE_M = (0.2, 3.0)  # depths a D435i reports reliably; the colour map spans this frame's share
 JPEG_QUALITY = 85
 
 
@@ -54,7 +54,10 @@ def image_jpeg(
         if depth is None:
             raise InvalidInputError("no depth image in the frame")
         z = depth.astype(np.float32) * np.float32(scale)
-        lo, hi = DEPTH_RANGE_M
+        valid = z[(z > DEPTH_RANGE_M[0]) & (z < DEPTH_RANGE_M[1])]
+        # the colour map spans what this frame sees (2nd-98th percentile), so a table scene has contrast
+        lo, hi = np.percentile(valid, [2, 98]) if valid.size > 100 else DEPTH_RANGE_M
+        hi = max(float(hi), float(lo) + 0.05)
         scaled = np.clip((z - lo) / (hi - lo), 0, 1)
         img = cv2.applyColorMap((255 * (1 - scaled)).astype(np.uint8), cv2.COLORMAP_TURBO)
         img[z <= 0] = 0

@@ -17,8 +17,8 @@ pytestmark = pytest.mark.integration
 def rgbd(w: int = 64, h: int = 48) -> vision_pb2.RGBDFrame:
     color = np.zeros((h, w, 3), np.uint8)
     color[:, : w // 2] = (255, 0, 0)  # left half red (RGB)
-    depth = np.full((h, w), 800, "<u2")
-    depth[0, 0] = 0  # no depth
+    depth = np.tile(np.linspace(600, 1000, w).astype("<u2"), (h, 1))  # nearer on the left
+    depth[:8, :8] = 0  # no depth
     return vision_pb2.RGBDFrame(
         header=common_pb2.Header(seq=1),
         intrinsics=vision_pb2.CameraIntrinsics(width=w, height=h, fx=50, fy=50, cx=w / 2, cy=h / 2),
@@ -46,9 +46,9 @@ async def test_colour_depth_views_and_detections(settings, sqlite_db, tmp_path) 
         assert img.shape == (48, 64, 3) and img[24, 10, 2] > 200 and img[24, 50, 2] < 50  # red, left (BGR)
         r = await c.get("/api/v1/camera/latest.jpg", params={"view": "depth"})
         depth = cv2.imdecode(np.frombuffer(r.content, np.uint8), cv2.IMREAD_COLOR)
-        assert (
-            depth[24, 32].sum() > 100 and depth[0, 0].sum() < 60
-        )  # mapped where there is depth, black where not
+        assert depth[3, 3].sum() < 60  # black where there is no depth
+        left, right = depth[24, 12].astype(int), depth[24, 60].astype(int)
+        assert np.abs(left - right).sum() > 150  # the colour map spans the frame's depths
 
         det = vision_pb2.DetectedObjects(header=common_pb2.Header(seq=7), calibrated=True, rod_detected=True)
         rod = det.rods.add(confidence=0.91, length_m=0.2, has_base=True)
