@@ -12,7 +12,8 @@ changes (500 Hz on an e-Series) and hands it to the loop; every wait is on that 
 Motion: moveJ/moveL are sent asynchronous (the script's move thread; ``output_int_register_2`` says
 when it ends), so a stop is never queued behind a move. ServoJ targets are queued here and sent one
 per ``t`` of controller time (UR's servoj reaches a target in ``t``; the Dobot queues them itself),
-which gives the driver the queue and ``current_command_id`` its flow control expects. All safety
+which gives the driver the queue and ``current_command_id`` (the command executing, as a Dobot's
+CurrentCommandId) its flow control and execution monitor expect. All safety
 checks stay in the shared driver; the controller's own protective stop is reported as an alarm.
 """
 
@@ -191,7 +192,12 @@ class URLink(FeedbackStream):
 
     # ------------------------------------------------------------------ feedback (loop thread)
     def _moving(self) -> bool:
-        return self._move is not None or self._servo_sent is not None or bool(self._servo_queue)
+        return (
+            self._move is not None
+            or self._servo_sent is not None
+            or bool(self._servo_queue)
+            or self._servo_busy
+        )
 
     def _on_sample(self, s: URSample) -> None:
         if self.state is ClientState.CLOSED:
@@ -199,11 +205,10 @@ class URLink(FeedbackStream):
         self.samples += 1
         self._sample = s
         if self._move is not None:
-            mid, op = self._move
+            _, op = self._move
             status = self._io.async_status()
             if status is not None and (status[1] != op or not status[0]):
                 self._move = None
-                self.current_command_id = max(self.current_command_id, mid)
         fb = to_feedback(
             s,
             moving=self._moving(),
@@ -388,6 +393,7 @@ class URLink(FeedbackStream):
             raise ControllerError(f"UR {self.host} refused {name}: {text}", alarms=tuple(ids))
         mid = self._new_id()
         self._move = (mid, op)
+        self.current_command_id = mid  # executing (a Dobot's CurrentCommandId); done when at rest
         return mid
 
     async def mov_j(
@@ -424,7 +430,6 @@ class URLink(FeedbackStream):
         if sent is not None and fb.timestamp_ms < self._servo_sent_ms + sent.t_s * 1000.0 - 1e-6:
             return
         if sent is not None:
-            self.current_command_id = max(self.current_command_id, sent.id)
             self._servo_sent = None
         if not self._servo_queue:
             if sent is not None:  # the stream ended: leave servo mode at the last target
@@ -433,6 +438,8 @@ class URLink(FeedbackStream):
             return
         item = self._servo_queue.popleft()
         self._servo_sent, self._servo_sent_ms = item, fb.timestamp_ms
+        # as a Dobot's CurrentCommandId: the target the controller is executing now
+        self.current_command_id = max(self.current_command_id, item.id)
         self._servo_busy = True
         asyncio.get_running_loop().create_task(self._servo_send(item), name=f"ur-servo-{self.host}")
 
