@@ -133,6 +133,16 @@ def test_stopj_stops_an_async_move_short_of_its_target(arm: Arm) -> None:
     assert not arm.c.getAsyncOperationProgressEx().isAsyncOperationRunning()
 
 
+def test_speedj_ramps_to_its_speed_and_speed_stop_brings_it_to_rest(arm: Arm) -> None:
+    q0 = arm.fresh_q()
+    assert arm.c.speedJ([0.0, 0.0, 0.0, 0.0, 0.0, 0.4], 2.0, 0.008)  # real-time: returns at once
+    arm.wait(lambda: abs(arm.r.getActualQd()[5] - 0.4) < 1e-9, 1.0)  # 0.2 s ramp at 2 rad/s²
+    assert arm.c.speedStop(4.0)
+    arm.wait(lambda: max(abs(v) for v in arm.r.getActualQd()) < 1e-9, 1.0)
+    end = arm.fresh_q()
+    assert end[5] > q0[5] + 0.02 and np.allclose(end[:5], q0[:5])  # only wrist 3 turned, forward
+
+
 def test_set_tcp_moves_the_reported_tcp_pose(arm: Arm) -> None:
     flange = np.array(arm.r.getActualTCPPose())
     assert arm.c.setTcp([0, 0, 0.15, 0, 0, 0])
