@@ -373,6 +373,7 @@ async def run_processes(
     drive: bool = True,
 ) -> list[Any]:
     """The whole cell as separate OS processes on loopback until Ctrl-C (or ``cycles`` picks)."""
+    from pydantic import SecretStr
     from rich.console import Console
 
     from gateway.security import generate_token
@@ -380,6 +381,10 @@ async def run_processes(
     console = console or Console()
     ports = ports or LocalPorts.from_settings(settings)
     token = settings.gateway.api_token.get_secret_value() if settings.gateway.api_token else generate_token()
+    # the launcher's own calls (enable, cycles, park) carry the token its services ask for
+    settings = settings.model_copy(
+        update={"gateway": settings.gateway.model_copy(update={"api_token": SecretStr(token)})}
+    )
     settings = with_state_dir(settings)
     var = settings.state.path(settings.cell_id, REPO_ROOT)  # this cell's own: never another cell's files
     specs = topology(
