@@ -74,6 +74,7 @@ def test_sim_ur_serves_rtde_and_the_dashboard_until_interrupted() -> None:
                 proc.kill()
 
 
+@pytest.mark.slow
 async def test_ur_keypose_runs_seed_003s_cycle_through_the_shared_driver(tmp_path: Path) -> None:
     from services.apps.ur_cli import run_ur_keypose
 
