@@ -22,7 +22,7 @@ import time
 import uuid
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field, replace
-from typing import cast
+from typing import TypeVar, cast
 
 import numpy as np
 
@@ -35,6 +35,7 @@ from services.common.errors import (
 )
 from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.kinematics.trajectory import JointTrajectory
+from services.task.deadline import within
 from services.task.moves import (
     blends,
     box_around,
@@ -42,18 +43,22 @@ from services.task.moves import (
     is_last_of,
     move_to,
     object_id,
+    park_pose,
     placed_box,
     pose_list,
     raised,
     run_end,
+    safe_home_of,
     starts_in_motion,
     with_way_home,
+    without_safe_home,
 )
 from services.task.pacing import paced_on_line
 from services.task.placement import free_place_xy, place_candidates
 from services.task.plan import state_for
 from services.task.planned import PlannedPick, Progress
 from services.task.ports import (
+    ArmView,
     GraspPlan,
     GraspPort,
     MotionPort,
@@ -69,6 +74,8 @@ from services.task.recovery import Action, Attempts, RetryLimits, decide
 from services.task.states import CycleState, PickOutcome, StateDeadlines
 
 log = logging.getLogger("pickplace.task.cycle")
+
+T = TypeVar("T")
 
 StateListener = Callable[[CycleState, str], None]
 Wait = Callable[[float], Awaitable[None]]
@@ -106,6 +113,7 @@ class Orchestrator:
         wait: Wait = asyncio.sleep,
         clock: Callable[[], float] = time.perf_counter,
         wall_clock: Callable[[], float] = time.perf_counter,
+        view: ArmView | None = None,
     ):
         self.vision, self.grasp, self.motion, self.robot = vision, grasp, motion, robot
         self.config = config or CycleConfig()
@@ -117,6 +125,8 @@ class Orchestrator:
         self._outcome: PickOutcome | None = None
         self._stage_t0: tuple[float, float] | None = None  # (clock, wall) at entry; None between cycles
         self._progress = Progress()
+        # the arm against the camera's view of the pick zone (None: only the safe home leaves it clear)
+        self._view = view
 
     # ------------------------------------------------------------------ bookkeeping
     def _enter(self, state: CycleState, message: str = "") -> None:
@@ -146,12 +156,17 @@ class Orchestrator:
         out.stage_wall_s[key] = out.stage_wall_s.get(key, 0.0) + (self._wall_clock() - t0[1])
         self._stage_t0 = None
 
-    async def _timed(self, aw, seconds: float, what: str):  # type: ignore[no-untyped-def]
+    async def _timed(self, aw: Awaitable[T], seconds: float, what: str) -> T:
+        """Compute (detection, planning) under a wall-clock deadline: it runs on this machine's time."""
         try:
             async with asyncio.timeout(seconds):
                 return await aw
         except TimeoutError:
             raise RobotError(f"{what} did not finish within its {seconds:.0f} s deadline") from None
+
+    async def _arm(self, aw: Awaitable[T], seconds: float, what: str) -> T:
+        """What the arm or the gripper does, under a deadline on the controller's clock."""
+        return await within(aw, seconds, what, self._clock)
 
     # ------------------------------------------------------------------ the cycle
     async def run(self, task: TaskKind | str = TaskKind.STAND_ROD) -> PickOutcome:
@@ -164,7 +179,7 @@ class Orchestrator:
         attempts = Attempts()
         self._enter(CycleState.INIT)
         try:
-            await self._timed(self.robot.recover(), self.config.deadlines.motion_s, "robot preparation")
+            await self._arm(self.robot.recover(), self.config.deadlines.motion_s, "robot preparation")
             await self._go_home()
             await self._cycle(task, out, attempts)
             out.success = True
@@ -211,8 +226,8 @@ class Orchestrator:
             try:
                 await self._execute(planned, self._progress)
                 if self.state is not CycleState.DONE:  # the plan's way home already entered it
-                    self._enter(CycleState.DONE, "returning to safe home")
-                await self._return_home(planned.plan, obs)
+                    self._enter(CycleState.DONE, "placed; the arm leaves the camera's view clear")
+                await self._return_home(planned, obs)
                 return True
             except SafetyError:
                 raise
@@ -291,7 +306,7 @@ class Orchestrator:
         # everything on the table that is not the target is an obstacle for the carried object too
         target_cube = obs.cubes[0] if task is TaskKind.SORT_CUBES and obs.cubes else None
         obstacles = (
-            obs.obstacles
+            self._not_the_arm(obs.obstacles, q)
             + tuple(
                 box_around(c.centroid, c.size / 2 + OBJECT_MARGIN_M)
                 for c in obs.cubes
@@ -330,7 +345,14 @@ class Orchestrator:
         grasp_wp = next((w for w in plan.waypoints if w.gripper is GripperCommand.CLOSE), plan.waypoints[0])
         out.pick_pose = pose_list(grasp_wp.T_base_tool)
         out.place_pose = [*map(float, plan.place_position), 0.0, 0.0, 0.0, 1.0]
-        plan = with_way_home(plan)
+        home = safe_home_of(plan)
+        if home is not None and not _near(q, home) and self._clear(q):
+            plan = without_safe_home(plan)  # out of the camera's view already: straight to the pre-grasp
+        if home is not None:
+            # back only as far as the first pose that leaves the camera's view clear for the next look
+            end = plan.waypoints[-1].joints
+            park = park_pose(end, home, self._clear) if self._view is not None else home
+            plan = with_way_home(plan, park)
         # the arm sets off as soon as the moves to its first stop are planned; the rest up to the
         # touch-down plans meanwhile (and what follows a touch-down plans from where it touched)
         n = len(plan.waypoints)
@@ -338,7 +360,7 @@ class Orchestrator:
             (i for i in range(n) if move_to(plan, i) is not None and not blends(plan, i)), n - 1
         )
         trajs = await self._motions(plan, range(first_stop + 1), q, obstacles)
-        planned = PlannedPick(plan, trajs, obstacles, rest_from=n)
+        planned = PlannedPick(plan, trajs, obstacles, rest_from=n, home=home)
         if first_stop + 1 < n:
             guarded = next(
                 (i for i in range(first_stop + 1, n) if plan.waypoints[i].guard_force_n > 0), n - 1
@@ -426,7 +448,7 @@ class Orchestrator:
                     traj = planned.trajs[i]
                     continues = traj is not None and ends_in_motion(traj)
                 if traj is not None:
-                    res = await self._timed(
+                    res = await self._arm(
                         self.robot.execute(traj, w.guard_force_n, continues=continues),
                         cfg.deadlines.motion_s,
                         f"motion to {w.name}",
@@ -454,15 +476,19 @@ class Orchestrator:
             self._progress = Progress(i, reached=True)
             if w.gripper is not None and not (in_motion and w.gripper is GripperCommand.OPEN):
                 close = w.gripper is GripperCommand.CLOSE
-                g = await self._timed(
+                g = await self._arm(
                     self.robot.gripper(close), cfg.deadlines.gripper_s, f"gripper {w.gripper}"
                 )
                 if close and g.object_detected is False and cfg.verify_grasp:
                     raise GraspFailureError(f"{w.name}: the gripper closed on nothing")
             if state is CycleState.LIFT and cfg.verify_grasp and is_last_of(plan, i, CycleState.LIFT):
-                holding = await self._timed(self.robot.holding(), cfg.deadlines.gripper_s, "grasp check")
-                if holding is False:
-                    raise GraspFailureError("grasp verification after LIFT: the object is not in the gripper")
+                # before the turn is queued, though the arm flows on: never carry on with an empty gripper
+                await self._check_holding()
+
+    async def _check_holding(self) -> None:
+        holding = await self._arm(self.robot.holding(), self.config.deadlines.gripper_s, "grasp check")
+        if holding is False:
+            raise GraspFailureError("grasp verification after LIFT: the object is not in the gripper")
 
     async def _open_ahead(self, planned: PlannedPick, i: int) -> None:
         """Open the jaws for the waypoints from ``i`` on that the arm passes without stopping (the
@@ -474,7 +500,7 @@ class Orchestrator:
                 return
             if plan.waypoints[k].gripper is GripperCommand.OPEN:
                 w = plan.waypoints[k]
-                await self._timed(
+                await self._arm(
                     self.robot.gripper(False), self.config.deadlines.gripper_s, f"gripper {w.gripper}"
                 )
 
@@ -485,7 +511,7 @@ class Orchestrator:
             return
         home = np.asarray(self.config.home_joints, dtype=float)
         q = await self.robot.joints()
-        if np.max(np.abs(q - home)) < 1e-3:
+        if _near(q, home) or self._clear(q):
             return
         traj = await self._timed(
             self._plan_single(q, Move(MotionKind.JOINT, home, label="SAFE_HOME"), ()),
@@ -493,29 +519,45 @@ class Orchestrator:
             "planning the way to safe home",
         )
         if traj is not None:
-            await self._timed(self.robot.execute(traj), self.config.deadlines.motion_s, "moving to safe home")
+            await self._arm(self.robot.execute(traj), self.config.deadlines.motion_s, "moving to safe home")
 
-    async def _return_home(self, plan: GraspPlan, obs: Observation) -> None:
-        """DONE: back to the plan's safe home, out of the camera's view of the table."""
-        home = plan.waypoints[0].joints
+    async def _return_home(self, planned: PlannedPick, obs: Observation) -> None:
+        """DONE: out of the camera's view of the table — where the plan's way home ended, or back to
+        the safe home when the arm is elsewhere (a touch-down cut short, a resumed plan)."""
+        home = planned.home
+        if home is None:
+            return
         # what was placed is now an obstacle too (the rod standing where the plan put it)
-        obstacles = (*obs.obstacles, placed_box(plan))
+        obstacles = (*obs.obstacles, placed_box(planned.plan))
         try:
             q = await self.robot.joints()
-            if np.max(np.abs(q - home)) > 1e-3:
-                traj = await self._timed(
-                    self._plan_single(q, Move(MotionKind.JOINT, home, label="HOME"), obstacles),
-                    self.config.deadlines.plan_s,
-                    "planning the way home",
-                )
-                if traj is not None:
-                    await self._timed(
-                        self.robot.execute(traj), self.config.deadlines.motion_s, "returning home"
-                    )
+            if _near(q, home) or self._clear(q):
+                return
+            traj = await self._timed(
+                self._plan_single(q, Move(MotionKind.JOINT, home, label="HOME"), obstacles),
+                self.config.deadlines.plan_s,
+                "planning the way home",
+            )
+            if traj is not None:
+                await self._arm(self.robot.execute(traj), self.config.deadlines.motion_s, "returning home")
         except SafetyError:
             raise
         except RobotError as exc:  # the object is placed; a failed way home is reported, not fatal
             log.warning("could not return to safe home after placing: %s", exc)
+
+    def _not_the_arm(self, boxes: tuple[SeenBox, ...], q: np.ndarray) -> tuple[SeenBox, ...]:
+        """The boxes vision saw, without those that are the arm itself where it stood for the picture."""
+        view = self._view
+        if view is None or _near(q, self.config.home_joints):
+            return boxes
+        kept = tuple(b for b in boxes if not view.holds_arm(q, b.min, b.max))
+        if len(kept) < len(boxes):
+            log.info("%d seen obstacle(s) are the arm itself: left out", len(boxes) - len(kept))
+        return kept
+
+    def _clear(self, q: np.ndarray) -> bool:
+        """Whether the arm at ``q`` leaves the camera's view of the pick zone clear (by the camera model)."""
+        return self._view is not None and bool(self._view.clear(np.asarray(q, dtype=float)))
 
     async def _plan_single(
         self, start: np.ndarray, move: Move, obstacles: tuple[SeenBox, ...]
@@ -529,7 +571,7 @@ class Orchestrator:
         view of the table, before looking again (an arm over the table hides the rod it let go of)."""
         await self.robot.gripper(False)
         q = await self.robot.joints()
-        home = planned.plan.waypoints[0].joints if planned.plan.waypoints[0].name == "SAFE_HOME" else None
+        home = planned.home
         try:
             up = raised(await self.motion.tool_pose(q), 0.08)
             moves = [Move(MotionKind.LINEAR, up, label="BACK_OFF", blend=home is not None)]
@@ -548,3 +590,10 @@ class Orchestrator:
             await self.robot.stop()
         except RobotError as exc:
             log.warning("stop while aborting failed: %s", exc)
+
+
+def _near(q: np.ndarray, target: np.ndarray | tuple[float, ...] | None) -> bool:
+    """The arm is at ``target`` within the tracking error a finished motion leaves."""
+    if target is None:
+        return False
+    return bool(np.max(np.abs(np.asarray(q) - np.asarray(target))) <= RESUME_TOLERANCE_RAD)

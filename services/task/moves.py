@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -66,16 +67,48 @@ def run_end(planned: PlannedPick, i: int) -> int:
 
 
 WAY_HOME = "HOME"
+SAFE_HOME = "SAFE_HOME"
 
 
-def with_way_home(plan: GraspPlan) -> GraspPlan:
-    """The plan with the move back to its safe home as its last waypoint (planned and blended with
-    the retract like any other move), when it starts at one."""
-    first = plan.waypoints[0]
-    if first.name != "SAFE_HOME":
+def safe_home_of(plan: GraspPlan) -> np.ndarray | None:
+    """The safe home a grasp plan starts at (its SAFE_HOME waypoint), if it has one."""
+    first = plan.waypoints[0] if plan.waypoints else None
+    return first.joints.copy() if first is not None and first.name == SAFE_HOME else None
+
+
+def without_safe_home(plan: GraspPlan) -> GraspPlan:
+    """The plan without its move to the safe home: the arm goes straight to the pre-grasp."""
+    if not plan.waypoints or plan.waypoints[0].name != SAFE_HOME:
         return plan
-    home = PlannedWaypoint(WAY_HOME, MotionKind.JOINT, first.T_base_tool.copy(), first.joints.copy())
+    return replace(plan, waypoints=plan.waypoints[1:])
+
+
+def with_way_home(plan: GraspPlan, target: np.ndarray | None) -> GraspPlan:
+    """The plan with a last joint move to ``target`` (the safe home, or the first pose on the way
+    there that leaves the camera's view clear), planned and blended with the retract like any other
+    move; unchanged when ``target`` is None (the arm may stay where the plan ends)."""
+    if target is None or not plan.waypoints:
+        return plan
+    last = plan.waypoints[-1]
+    home = PlannedWaypoint(
+        WAY_HOME, MotionKind.JOINT, last.T_base_tool.copy(), np.asarray(target, dtype=float).copy()
+    )
     return replace(plan, waypoints=[*plan.waypoints, home])
+
+
+PARK_STEPS = 10  # poses tried on the joint line from the plan's end to the safe home
+
+
+def park_pose(start: np.ndarray, home: np.ndarray, clear: Callable[[np.ndarray], bool]) -> np.ndarray | None:
+    """Where the arm goes after a plan that ends at ``start``: None when ``start`` already leaves
+    the camera's view clear, else the first pose on the straight joint line to ``home`` that does
+    (the safe home itself at the latest)."""
+    start, home = np.asarray(start, dtype=float), np.asarray(home, dtype=float)
+    for k in range(PARK_STEPS):
+        q = start + (k / PARK_STEPS) * (home - start)
+        if clear(q):
+            return None if k == 0 else q
+    return home
 
 
 PLACED_TOP_CLEARANCE_M = 0.03

@@ -7,6 +7,8 @@ import asyncio
 from collections.abc import Awaitable
 from dataclasses import dataclass
 
+import numpy as np
+
 from services.common.errors import PlanningError
 from services.kinematics.trajectory import JointTrajectory
 from services.task.ports import GraspPlan, SeenBox
@@ -22,6 +24,7 @@ class PlannedPick:
     # the motions from waypoint ``rest_from`` on, still being planned while the arm makes the first ones
     rest: asyncio.Task[list[JointTrajectory | None]] | None = None
     rest_from: int = 0
+    home: np.ndarray | None = None  # the safe home of the plan (regrasps and the way home go there)
 
     async def settle(self, seconds: float) -> None:
         """Wait for the rest of the motions (PlanningError / RobotError as planning raised them)."""

@@ -27,11 +27,14 @@ from services.common.keys import CellKeys
 from services.common.modes import TaskKind
 from services.common.settings import Settings
 from services.common.shell import GrpcShell, ShellStateError, cell_token
+from services.kinematics.model import load_arm
+from services.kinematics.tool import tool_geometry
 from services.task.clients import CellClients
 from services.task.cycle import CycleConfig, Orchestrator
 from services.task.messages import pick_event_msg
 from services.task.recovery import RetryLimits
 from services.task.states import CycleState, PickOutcome, StateDeadlines, TaskCounters
+from services.task.view import CameraModel, ViewCheck
 
 log = logging.getLogger("pickplace.task.service")
 
@@ -92,6 +95,29 @@ def cycle_config(settings: Settings) -> CycleConfig:
     )
 
 
+def view_check(settings: Settings) -> ViewCheck | None:
+    """The camera-model check of the arm against the camera's view of the pick zone (None when
+    ``task.park_out_of_view`` is off: then only the safe home counts as out of view)."""
+    t = settings.task
+    if not t.park_out_of_view:
+        return None
+    cam = settings.sim.twin.camera
+    zone = settings.sim.twin.scene
+    camera = CameraModel.look_at(cam.position_m, cam.look_at_m, cam.fovy_deg, cam.width, cam.height)
+    arm = load_arm(settings.robot.model, tool_geometry(settings))
+    return ViewCheck(
+        arm,
+        camera,
+        zone.pick_zone_min_m,
+        zone.pick_zone_max_m,
+        t.view_zone_height_m,
+        settings.grasp.table_z_m,
+        t.view_margin_px,
+        settings.vision.cubes.max_height_m,  # vision sees what stands this high on the table ...
+        settings.vision.cubes.robot_base_radius_m,  # ... but for the robot's own base
+    )
+
+
 class TaskRunner:
     """Runs cycles, tracks counters and status, and reports every outcome."""
 
@@ -129,6 +155,7 @@ class TaskRunner:
             cycle_config(settings),
             on_state=self._on_state,
             clock=clock,
+            view=view_check(settings),
         )
 
     # ------------------------------------------------------------------ status

@@ -47,7 +47,8 @@ PROGRESS = {
 
 @dataclass(frozen=True)
 class StateDeadlines:
-    """Wall-clock budget of each state (s); exceeding it fails the state with a timeout."""
+    """Budget of each state (s); exceeding it fails the state with a timeout. Detection and planning
+    are compute, timed on the wall clock; motion and gripper deadlines run on the controller clock."""
 
     detect_s: float = 10.0
     plan_s: float = 20.0

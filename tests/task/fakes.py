@@ -296,6 +296,22 @@ class WaitRecorder:
 
 
 @dataclass
+class FakeView:
+    """The arm against the camera on the toy arm: the view is clear with the tool at least
+    ``clear_above_m`` high; a seen box is the arm when the tool (q[:3]) lies inside it."""
+
+    clear_above_m: float = 0.25
+    asked: list[tuple[float, ...]] = field(default_factory=list)
+
+    def clear(self, q: np.ndarray) -> bool:
+        self.asked.append(tuple(q))
+        return bool(q[2] >= self.clear_above_m - 1e-9)
+
+    def holds_arm(self, q: np.ndarray, box_min: np.ndarray, box_max: np.ndarray) -> bool:
+        return bool(np.all(q[:3] >= box_min) and np.all(q[:3] <= box_max))
+
+
+@dataclass
 class FakeCell:
     """The four fakes and an orchestrator over them, its states recorded and its clock the robot's."""
 
@@ -310,6 +326,7 @@ class FakeCell:
         )
     )
     wait: WaitRecorder = field(default_factory=WaitRecorder)
+    view: FakeView | None = None
     states: list[CycleState] = field(default_factory=list)
     messages: list[str] = field(default_factory=list)
 
@@ -323,6 +340,7 @@ class FakeCell:
             on_state=self._on_state,
             wait=self.wait,
             clock=lambda: self.robot.clock_s,
+            view=self.view,
         )
 
     def _on_state(self, state: CycleState, message: str) -> None:

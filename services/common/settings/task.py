@@ -35,5 +35,11 @@ class TaskSettings(Model):
     holding_speed_scale: float = Field(1.0, gt=0, le=1)
     # a guarded line's planned speed; the task paces it (grasp: slow only through the last band)
     guarded_speed_scale: float = Field(0.5, gt=0, le=1)
+    # After a cycle the arm stays where its retract leaves the camera's view of the pick zone clear (or
+    # goes only as far toward the safe home as that takes), decided by projecting its collision model
+    # into the camera (sim.twin.camera) against the pick zone (sim.twin.scene) raised to this height.
+    park_out_of_view: bool = True
+    view_zone_height_m: float = Field(0.06, ge=0, le=0.5)
+    view_margin_px: float = Field(12.0, ge=0, le=200)
     # A fresh twin scene after each cycle in `pickplace up` (the simulated operator lays the rod down again).
     reset_scene_each_cycle: bool = True
