@@ -21,7 +21,8 @@ and mass, frictions, table height, grip force, the drive's tracking and latency,
 intrinsics, depth noise, light), seeded from the trial's seed and recorded in the trial's JSON; the cell
 is told none of it. ``randomize=False`` (``--nominal``) runs every trial in the configured world. The
 report (``eval_report``) gives the success rate with its 95 % Wilson interval and the success per bin of
-each randomized parameter.
+each randomized parameter. ``calibration_error`` perturbs the nominal camera pose the cell is given; in a
+randomized world the camera's own mount error comes on top of it.
 """
 
 from __future__ import annotations
