@@ -102,10 +102,11 @@ async def run_pick_cell(
     """``on_ready(cell, dashboard_url)`` once everything serves; ``on_tick()`` after each display refresh."""
     started = time.perf_counter()
     last: list[PickOutcome] = []
-    from gateway.server import embedded_gateway
+    from gateway.server import embedded_gateway, embedded_settings
     from services.apps.launcher import session_log, with_state_dir
 
-    settings = with_state_dir(settings)
+    # the cell's token before its services are built: every gRPC service asks for it (as the edge does)
+    settings, _token = embedded_settings(with_state_dir(settings))
     async with (
         aio_session(session_log(settings, "up")),
         Cell(settings, engine="twin") as cell,
