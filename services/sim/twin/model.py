@@ -146,7 +146,10 @@ def arm_gains(model: mujoco.MjModel, arm_qpos: Array, arm_dof: Array, bandwidth:
 
 
 def build_world(
-    settings: Settings, seed: int | None = None, scene: Scene | None = None, variation: Variation | None = None
+    settings: Settings,
+    seed: int | None = None,
+    scene: Scene | None = None,
+    variation: Variation | None = None,
 ) -> TwinWorld:
     """Compile the cell for the configured robot and a seeded (or given) scene.
 
