@@ -164,15 +164,17 @@ class _Labelled:
         self.labels = labels
 
     def collect(self) -> Iterator[Metric]:
-        seen: set[str] = set()
+        chosen: dict[str, Metric] = {}  # in first-seen order; a family with samples wins over an empty one
         for source in self.sources:
             for family in source.collect():
-                if family.name in seen or not family.samples:
-                    continue
-                seen.add(family.name)
-                out = Metric(family.name, family.documentation, family.type, family.unit)
-                out.samples = [s._replace(labels={**s.labels, **self.labels}) for s in family.samples]
-                yield out
+                if family.name not in chosen or (family.samples and not chosen[family.name].samples):
+                    chosen[family.name] = family
+        for family in chosen.values():
+            # an empty family is still declared (HELP/TYPE): a counter nothing has counted yet, such as
+            # the e-stops of a cell that never stopped, is a series the dashboards may query
+            out = Metric(family.name, family.documentation, family.type, family.unit)
+            out.samples = [s._replace(labels={**s.labels, **self.labels}) for s in family.samples]
+            yield out
 
 
 def labelled_registry(

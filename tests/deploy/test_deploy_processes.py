@@ -77,6 +77,8 @@ async def test_processes_pick_survive_a_vision_crash_and_keep_every_pick(tmp_pat
                 "database": {"url": PG_URL, "schema_name": schema},
                 "sim": {"seed": 3},
                 "logging": {"file": str(tmp_path / "test.log")},
+                # the token every service asks for: the test's own calls carry it like the launcher's
+                "gateway": {"api_token": TOKEN},
             },
         )
         ports = LocalPorts.free()

@@ -197,5 +197,5 @@ class VisionSettings(Model):
     calibration: CalibrationSettings = CalibrationSettings()
     detect_rods: bool = True
     detect_cubes: bool = True
-    rate_hz: float = Field(5.0, gt=0, le=90, description="detections published per second at most")
+    rate_hz: float = Field(5.0, ge=0.01, le=90, description="detections published per second at most")
     debug_jpeg_quality: int = Field(80, ge=10, le=100)
