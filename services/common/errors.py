@@ -133,6 +133,12 @@ class LimitViolationError(SafetyError):
     """A command would leave joint, velocity or workspace limits; it was not sent."""
 
 
+class ContinuationLateError(LimitViolationError):
+    """A trajectory that continues a motion in flight came after that motion had ended (the arm is at
+    rest, the trajectory starts moving): streamed as it is it would be a step in speed. Nothing was
+    sent; plan it again from rest."""
+
+
 def _all_subclasses(cls: type[RobotError]) -> dict[str, type[RobotError]]:
     found: dict[str, type[RobotError]] = {cls.__name__: cls}
     for sub in cls.__subclasses__():

@@ -20,10 +20,12 @@ from typing import TypeVar
 import numpy as np
 
 from services.common.errors import (
+    ContinuationLateError,
     ControllerError,
     EmergencyStopError,
     ExecutionError,
     InvalidInputError,
+    LimitViolationError,
     RobotBusyError,
     RobotCommunicationError,
     TrajectoryExecutionError,
@@ -360,7 +362,15 @@ class RobotDriver(Supervision):
         targets = self._servo_targets(traj, period)
         self.limits.check_all(targets, "trajectory")
         self.limits.check_velocities(targets, period, q_start=q_now)
-        self.limits.check_accelerations(targets, period, q_before)
+        try:
+            self.limits.check_accelerations(targets, period, q_before)
+        except LimitViolationError as exc:
+            if not following and bool(np.any(np.abs(traj.velocities[0]) > 1e-9)):
+                raise ContinuationLateError(
+                    f"{exc}: it continues a motion that has already ended (the arm is at rest); "
+                    "plan it again from rest"
+                ) from exc
+            raise
         return targets, q_before, following
 
     async def _stream(

@@ -27,6 +27,7 @@ from typing import TypeVar, cast
 import numpy as np
 
 from services.common.errors import (
+    ContinuationLateError,
     GraspFailureError,
     ObjectNotDetectedError,
     PlanningError,
@@ -448,11 +449,33 @@ class Orchestrator:
                     traj = planned.trajs[i]
                     continues = traj is not None and ends_in_motion(traj)
                 if traj is not None:
-                    res = await self._arm(
-                        self.robot.execute(traj, w.guard_force_n, continues=continues),
-                        cfg.deadlines.motion_s,
-                        f"motion to {w.name}",
-                    )
+                    try:
+                        res = await self._arm(
+                            self.robot.execute(traj, w.guard_force_n, continues=continues),
+                            cfg.deadlines.motion_s,
+                            f"motion to {w.name}",
+                        )
+                    except ContinuationLateError as exc:
+                        # the motion this one flows from ended before it came (a busy planner, a slow
+                        # machine): the arm rests; from here to the end of the run is planned from rest
+                        log.info("%s: %s", w.name, exc)
+                        q_now = await self.robot.joints()
+                        end = run_end(planned, i)
+                        again = await self._timed(
+                            self._motions(plan, range(i, end + 1), q_now, planned.obstacles),
+                            cfg.deadlines.plan_s,
+                            f"replanning {w.name} from rest",
+                        )
+                        planned.trajs[i : end + 1] = again[i : end + 1]
+                        traj = planned.trajs[i]
+                        if traj is None:
+                            raise
+                        continues = ends_in_motion(traj)
+                        res = await self._arm(
+                            self.robot.execute(traj, w.guard_force_n, continues=continues),
+                            cfg.deadlines.motion_s,
+                            f"motion to {w.name}",
+                        )
                     q_known, in_motion = res.final_q, continues
                     log.debug(
                         "%s: planned %.2f s, executed %.2f s%s",

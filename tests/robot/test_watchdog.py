@@ -16,7 +16,7 @@ import pytest
 from pickplace.v1 import robot_pb2, robot_pb2_grpc
 
 from services.common import grpc_util
-from services.common.errors import ExecutionError, LimitViolationError
+from services.common.errors import ContinuationLateError, ExecutionError
 from services.common.settings import Settings
 from services.dobot import RobotMode
 from services.kinematics.interpolation import quintic_move
@@ -143,8 +143,9 @@ async def test_a_continuation_that_never_comes_stops_the_arm_and_the_next_is_jud
     assert log[-1][1] == "Stop()"
     assert sum(1 for _, t in log if t.startswith("ServoJ")) == n_servo
     assert "ServoJ watchdog" in str(driver.last_fault)
-    # the late successor would start the stopped arm at full speed: judged from rest, it is refused
-    with pytest.raises(LimitViolationError, match="accelerate"):
+    # the late successor would start the stopped arm at full speed: judged from rest, it is refused,
+    # as a late continuation the task plans again from rest
+    with pytest.raises(ContinuationLateError, match=r"accelerate.*plan it again from rest"):
         await driver.execute_trajectory(second, PERIOD)
 
 

@@ -139,3 +139,21 @@ async def test_the_arm_is_brought_home_first_when_a_cycle_starts_elsewhere() -> 
     assert cell.robot.commands[:2] == [("recover",), ("move", "SAFE_HOME", False)]
     # the grasp plan then starts at home: its SAFE_HOME needs no motion
     assert cell.moves()[1] == "PRE_GRASP"
+
+
+async def test_a_continuation_that_came_too_late_is_planned_again_from_rest() -> None:
+    """The driver refuses a trajectory that flows from a motion that has already ended (a step in
+    speed); the cycle plans that run again from where the arm rests and goes on."""
+    from services.common.errors import ContinuationLateError
+    from tests.task.fakes import Fault
+
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))))
+    cell.motion.blending = True
+    late = ContinuationLateError("joint 3 would accelerate at 330°/s²: the motion it continues has ended")
+    cell.robot.faults[1] = Fault(late, at=0.0)  # GRASP, which flows from PRE_GRASP
+    planned_before = len(cell.motion.requests)
+    outcome = await cell.run()
+    assert outcome.success, outcome.failure_reason
+    moves = [c for c in cell.robot.commands if c[0] == "move"]
+    assert moves[:3] == [("move", "PRE_GRASP", False), ("move", "GRASP", False), ("move", "GRASP", False)]
+    assert len(cell.motion.requests) > planned_before + 3  # the plan's three requests and the replan
