@@ -158,7 +158,8 @@ def test_a_target_beyond_a_joint_limit_ends_in_a_protective_stop(arm: Arm) -> No
     bad = q0.copy()
     bad[2] = 3.5  # the elbow's limit is ±π
     assert not arm.c.moveJ(bad.tolist(), 1.0, 1.0)  # ur_rtde: the command failed
-    assert arm.r.getSafetyMode() == SafetyMode.PROTECTIVE_STOP
+    # the receive side reports it from the next package on (its newest one may predate the stop)
+    arm.wait(lambda: arm.r.getSafetyMode() == SafetyMode.PROTECTIVE_STOP, 0.5)
     assert arm.r.isProtectiveStopped()
     assert arm.db.safetystatus() == "Safetystatus: PROTECTIVE_STOP"
     assert any("elbow_joint" in e and "joint position limit" in e for e in arm.sim.events())
