@@ -53,20 +53,7 @@ class TokenAuthInterceptor(grpc.aio.ServerInterceptor):
             else "bearer token is not valid"
         )
 
-        async def deny_unary(request: Any, context: grpc.aio.ServicerContext) -> Any:
-            await context.abort(grpc.StatusCode.UNAUTHENTICATED, message)
-
-        async def deny_stream(request: Any, context: grpc.aio.ServicerContext) -> AsyncIterator[Any]:
-            await context.abort(grpc.StatusCode.UNAUTHENTICATED, message)
-            yield  # pragma: no cover  (makes this an async generator)
-
-        if handler.unary_stream is not None:
-            return grpc.unary_stream_rpc_method_handler(
-                deny_stream, handler.request_deserializer, handler.response_serializer
-            )
-        return grpc.unary_unary_rpc_method_handler(
-            deny_unary, handler.request_deserializer, handler.response_serializer
-        )
+        return grpc_util.unauthenticated_handler(handler, message)
 
 
 async def _passthrough(context: grpc.aio.ServicerContext, exc: grpc.aio.AioRpcError) -> NoReturn:

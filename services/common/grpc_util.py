@@ -150,21 +150,28 @@ class TokenAuthInterceptor(grpc.aio.ServerInterceptor):
             else "bearer token is not valid"
         )
         log.warning("refused an unauthenticated call to %s", method)
+        return unauthenticated_handler(handler, message)
 
-        async def deny_unary(request: Any, context: grpc.aio.ServicerContext) -> Any:
-            await context.abort(grpc.StatusCode.UNAUTHENTICATED, message)
 
-        async def deny_stream(request: Any, context: grpc.aio.ServicerContext) -> AsyncIterator[Any]:
-            await context.abort(grpc.StatusCode.UNAUTHENTICATED, message)
-            yield  # pragma: no cover  (makes this an async generator)
+def unauthenticated_handler(
+    handler: grpc.RpcMethodHandler[Any, Any], message: str
+) -> grpc.RpcMethodHandler[Any, Any]:
+    """A handler of the same kind as ``handler`` that refuses the call as UNAUTHENTICATED."""
 
-        if handler.unary_stream is not None:
-            return grpc.unary_stream_rpc_method_handler(
-                deny_stream, handler.request_deserializer, handler.response_serializer
-            )
-        return grpc.unary_unary_rpc_method_handler(
-            deny_unary, handler.request_deserializer, handler.response_serializer
+    async def deny_unary(request: Any, context: grpc.aio.ServicerContext) -> Any:
+        await context.abort(grpc.StatusCode.UNAUTHENTICATED, message)
+
+    async def deny_stream(request: Any, context: grpc.aio.ServicerContext) -> AsyncIterator[Any]:
+        await context.abort(grpc.StatusCode.UNAUTHENTICATED, message)
+        yield  # pragma: no cover  (makes this an async generator)
+
+    if handler.unary_stream is not None:
+        return grpc.unary_stream_rpc_method_handler(
+            deny_stream, handler.request_deserializer, handler.response_serializer
         )
+    return grpc.unary_unary_rpc_method_handler(
+        deny_unary, handler.request_deserializer, handler.response_serializer
+    )
 
 
 class _BearerUnaryUnary(grpc.aio.UnaryUnaryClientInterceptor):

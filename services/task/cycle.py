@@ -415,6 +415,20 @@ class Orchestrator:
         return traj
 
     # ------------------------------------------------------------------ EXECUTE
+    async def _replan_run(
+        self, planned: PlannedPick, i: int, q_now: np.ndarray, what: str
+    ) -> JointTrajectory | None:
+        """Plan waypoint ``i`` to the end of its blended run again from ``q_now`` (the arm at rest);
+        returns waypoint ``i``'s new trajectory."""
+        end = run_end(planned, i)
+        again = await self._timed(
+            self._motions(planned.plan, range(i, end + 1), q_now, planned.obstacles),
+            self.config.deadlines.plan_s,
+            what,
+        )
+        planned.trajs[i : end + 1] = again[i : end + 1]
+        return planned.trajs[i]
+
     async def _execute(self, planned: PlannedPick, resume: Progress) -> None:
         """From waypoint ``resume.index`` on (its motion skipped when the arm had reached it)."""
         cfg = self.config
@@ -439,14 +453,7 @@ class Orchestrator:
                 if not in_motion and (off or starts_in_motion(traj)):
                     # the arm is not where the plan assumed (a guarded stop, an alarm), or it is at rest
                     # where the plan flows through: replan from here to the end of this blended run
-                    end = run_end(planned, i)
-                    again = await self._timed(
-                        self._motions(plan, range(i, end + 1), q_now, planned.obstacles),
-                        cfg.deadlines.plan_s,
-                        f"replanning {w.name}",
-                    )
-                    planned.trajs[i : end + 1] = again[i : end + 1]
-                    traj = planned.trajs[i]
+                    traj = await self._replan_run(planned, i, q_now, f"replanning {w.name}")
                     continues = traj is not None and ends_in_motion(traj)
                 if traj is not None:
                     try:
@@ -460,14 +467,7 @@ class Orchestrator:
                         # machine): the arm rests; from here to the end of the run is planned from rest
                         log.info("%s: %s", w.name, exc)
                         q_now = await self.robot.joints()
-                        end = run_end(planned, i)
-                        again = await self._timed(
-                            self._motions(plan, range(i, end + 1), q_now, planned.obstacles),
-                            cfg.deadlines.plan_s,
-                            f"replanning {w.name} from rest",
-                        )
-                        planned.trajs[i : end + 1] = again[i : end + 1]
-                        traj = planned.trajs[i]
+                        traj = await self._replan_run(planned, i, q_now, f"replanning {w.name} from rest")
                         if traj is None:
                             raise
                         continues = ends_in_motion(traj)
