@@ -36,7 +36,7 @@ import random
 import re
 import time
 from collections import Counter, deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -217,6 +217,17 @@ def _backoff(attempt: int, rs: ReconnectSettings) -> float:
     """Capped exponential backoff with full jitter."""
     cap = min(rs.max_delay_s, rs.base_delay_s * (2**attempt))
     return random.uniform(cap / 2, cap)
+
+
+def _raise_for(command: str, reply: dobot.Reply) -> None:
+    """ControllerError (or EmergencyStopError) unless the reply's ErrorID is 0."""
+    if reply.error_id == dobot.ErrorID.ESTOP:
+        raise EmergencyStopError(f"{command} refused: {dobot.describe_error_id(reply.error_id)}")
+    if reply.error_id != 0:
+        raise ControllerError(
+            f"{command} refused with ErrorID {reply.error_id}: {dobot.describe_error_id(reply.error_id)}",
+            error_id=reply.error_id,
+        )
 
 
 class DobotClient:
@@ -667,60 +678,78 @@ class DobotClient:
         A queue (motion) command is refused while a Stop is owed after a link loss, and fails when the
         link is lost between sending it and its reply: it may have been cut by that Stop, and it is
         never resent."""
-        key = echo_key(command)
-        queued = key.split("(", 1)[0] in dobot.QUEUE_COMMANDS
-        if queued and self.stop_owed:
+        return (await self.raw_requests([command], timeout_s))[0]
+
+    async def raw_requests(
+        self, commands: Sequence[str], timeout_s: float | None = None
+    ) -> list[dobot.Reply]:
+        """Send ``commands`` in one write — pipelined: none waits for another's reply, so the
+        controller receives them together — and return their replies in order, whatever the ErrorIDs.
+        The rules of :meth:`raw_request` hold for each; the first failure fails the whole call (a
+        command whose reply was not awaited then is treated as timed out: its reply is discarded)."""
+        if not commands:
+            return []
+        keys = [echo_key(c) for c in commands]
+        queued = [k.split("(", 1)[0] in dobot.QUEUE_COMMANDS for k in keys]
+        if any(queued) and self.stop_owed:
+            first = commands[queued.index(True)]
             raise RobotCommunicationError(
-                f"{command!r} refused: the robot link was lost during motion and the Stop it owes the "
+                f"{first!r} refused: the robot link was lost during motion and the Stop it owes the "
                 "controller is not yet delivered"
             )
         await self._ensure_dashboard()
         assert self._writer is not None
         epoch = self.link_epoch
-        fut: asyncio.Future[dobot.Reply] = asyncio.get_running_loop().create_future()
-        pending = _Pending(command, fut, key)
-        self._pending.append(pending)
+        loop = asyncio.get_running_loop()
+        pendings = [_Pending(c, loop.create_future(), k) for c, k in zip(commands, keys, strict=True)]
+        self._pending.extend(pendings)
         timeout = self.request_timeout_s if timeout_s is None else timeout_s
+        replies: list[dobot.Reply] = []
         try:
-            self._writer.write(command.encode())
+            self._writer.write("".join(commands).encode())
             async with asyncio.timeout(timeout):
-                reply = await fut
+                for p in pendings:
+                    replies.append(await p.future)
         except TimeoutError:
             raise RobotCommunicationError(
-                f"no reply to {command!r} from {self.host}:{self.dashboard_port} within {timeout:.2f}s"
+                f"no reply to {commands[len(replies)]!r} from {self.host}:{self.dashboard_port} "
+                f"within {timeout:.2f}s"
             ) from None
         except OSError as exc:
             self._link_lost(f"dashboard send failed: {exc}")
             self._drop_dashboard(RobotCommunicationError(f"send failed: {exc}"))
-            raise RobotCommunicationError(f"sending {command!r} failed: {exc}") from exc
+            raise RobotCommunicationError(f"sending {commands[0]!r} failed: {exc}") from exc
         finally:
-            if not fut.done():
-                # timed out or cancelled: the controller may still answer; a tombstone takes that reply
-                pending.abandoned = True
-                fut.cancel()
-                tombstones = [p for p in self._pending if p.abandoned]
-                for old in tombstones[: max(0, len(tombstones) - MAX_TOMBSTONES)]:
-                    self._pending.remove(old)
-        if queued and reply.error_id == 0:
-            rid = reply.result_id
+            for p in pendings:
+                if not p.future.done():
+                    # timed out or cancelled: the controller may still answer; a tombstone takes that reply
+                    p.abandoned = True
+                    p.future.cancel()
+                elif not p.future.cancelled():
+                    p.future.exception()  # retrieved (a failure after the first is not raised)
+            tombstones = [p for p in self._pending if p.abandoned]
+            for old in tombstones[: max(0, len(tombstones) - MAX_TOMBSTONES)]:
+                self._pending.remove(old)
+        accepted = [r.result_id for r, q in zip(replies, queued, strict=True) if q and r.error_id == 0]
+        if accepted:
+            ids = [rid for rid in accepted if rid is not None]
             if epoch != self.link_epoch:
-                if rid is not None:
-                    self._cut_upto_id = max(self._cut_upto_id, rid)
-                raise RobotCommunicationError(f"the robot link was lost while {command!r} was being accepted")
-            if rid is not None:
-                self._last_queued_id = rid if self._last_queued_id is None else max(self._last_queued_id, rid)
-        return reply
+                if ids:
+                    self._cut_upto_id = max(self._cut_upto_id, *ids)
+                raise RobotCommunicationError(
+                    f"the robot link was lost while {commands[0]!r}{' and the rest' if len(commands) > 1 else ''} "
+                    "was being accepted"
+                )
+            if ids:
+                self._last_queued_id = max(
+                    ids if self._last_queued_id is None else [self._last_queued_id, *ids]
+                )
+        return replies
 
     async def request(self, command: str, timeout_s: float | None = None) -> dobot.Reply:
         """Send one command; raise ControllerError (or EmergencyStopError) unless ErrorID is 0."""
         reply = await self.raw_request(command, timeout_s)
-        if reply.error_id == dobot.ErrorID.ESTOP:
-            raise EmergencyStopError(f"{command} refused: {dobot.describe_error_id(reply.error_id)}")
-        if reply.error_id != 0:
-            raise ControllerError(
-                f"{command} refused with ErrorID {reply.error_id}: {dobot.describe_error_id(reply.error_id)}",
-                error_id=reply.error_id,
-            )
+        _raise_for(command, reply)
         return reply
 
     # ------------------------------------------------------------------ commands (SI)
@@ -819,6 +848,16 @@ class DobotClient:
     async def servo_j(self, q: ArrayLike, t_s: float) -> int | None:
         q_rad = finite_vector(q, 6, "servo target")
         return (await self.request(dobot.servo_j(_deg(q_rad), t_s))).result_id
+
+    async def servo_j_many(self, qs: Sequence[ArrayLike], t_s: float) -> list[int | None]:
+        """ServoJ targets pipelined in one write (the controller queues them together, so none can find
+        it run dry behind another); their queue IDs. ControllerError (EmergencyStopError) at the first
+        refused, as :meth:`request`."""
+        commands = [dobot.servo_j(_deg(finite_vector(q, 6, "servo target")), t_s) for q in qs]
+        replies = await self.raw_requests(commands)
+        for command, reply in zip(commands, replies, strict=True):
+            _raise_for(command, reply)
+        return [r.result_id for r in replies]
 
     async def rel_mov_l_tool(
         self, offset_m_rad: ArrayLike, a: int | None = None, v: int | None = None

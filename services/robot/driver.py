@@ -13,8 +13,10 @@ import asyncio
 import contextlib
 import logging
 import time
+from collections import deque
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, replace
+from math import ceil
 from typing import TypeVar
 
 import numpy as np
@@ -36,8 +38,9 @@ from services.kinematics.robot_models import RobotSpec
 from services.kinematics.trajectory import JointTrajectory
 from services.robot.client import FeedbackState, LinkState
 from services.robot.gripper import DigitalOutputGripper, GripperState
-from services.robot.link import ControllerLink
+from services.robot.link import ControllerLink, PipelinedServo
 from services.robot.monitor import ClockRate, MoveMonitor, StreamMonitor
+from services.robot.resume import ease_in_offset, retime_from_rest
 from services.robot.safety import SafetyLimits
 from services.robot.supervision import Supervision
 
@@ -52,6 +55,15 @@ CONTINUE_EXTRA_TARGETS = 8
 # a target is sent on feedback no older than this (host clock): after the host stalled, the packets
 # that queued meanwhile are read first (the controller may have run dry in the meantime)
 STALE_FEEDBACK_NS = 20_000_000
+# a target that would be a step from rest is sent only while the controller holds targets for at least
+# this long (host time): the packet behind the decision and the target itself may each be late by a
+# few scheduler slices on a loaded host; less than that in hand, the stream is resumed from rest instead
+RESUME_MARGIN_S = 0.05
+# ... or twice the longest a recent batch took from the packet behind its decision to its replies
+# (controller time): a loaded host (or a simulator slowed with it) learns its own latency
+SEND_LAGS_KEPT = 64
+LAG_FACTOR = 2.0
+MAX_WINDOW = 16  # the most targets held ahead, however slow the host (0.48 s at 30 ms)
 
 
 @dataclass(frozen=True)
@@ -60,6 +72,7 @@ class MoveResult:
     duration_s: float
     attempts: int
     stopped_early: bool = False  # a guarded move's stop condition fired
+    resumed: int = 0  # times the stream ran dry (the host fell behind) and was resumed from rest
 
 
 StopCondition = Callable[[FeedbackState], bool]
@@ -95,6 +108,9 @@ class RobotDriver(Supervision):
         self._gap_task: asyncio.Task[None] | None = None  # watches a continuation until the next comes
         self.watchdog_trips = 0  # ServoJ streams stopped for want of targets
         self.monitor_trips = 0  # motions stopped for leaving their path or missing their goal
+        self.stream_resumes = 0  # ServoJ streams that fell behind and were resumed from rest
+        # controller ms from the packet behind a ServoJ batch's decision to its replies (recent batches)
+        self._send_lags_ms: deque[float] = deque(maxlen=SEND_LAGS_KEPT)
         self.last_fault: ExecutionError | None = None
         self.last_fault_stamp_ms: int | None = None  # the packet that tripped it (controller clock)
         # the look-ahead covers the host's latency, which is wall time: a controller clock that runs N×
@@ -298,6 +314,7 @@ class RobotDriver(Supervision):
                 monitor = StreamMonitor(q_before[-1], period, r.path_tolerance_rad, r.servo_watchdog_margin_s)
             monitor.period_s = period
             monitor.owed = True
+            monitor.ends_slowed = False
             self._watch(monitor)
             keep_watching = False
             try:
@@ -306,7 +323,7 @@ class RobotDriver(Supervision):
                 res = await self._monitored(
                     self._stream(targets, period, monitor, wait_done=not continues), "trajectory"
                 )
-                if not continues:
+                if not continues or monitor.ends_slowed:  # (resumed from rest, it ends at rest)
                     fb = await self._check_goal(targets[-1], "trajectory")
                     return replace(res, final_q=fb.q.copy())
                 keep_watching = True
@@ -319,7 +336,7 @@ class RobotDriver(Supervision):
                     self._monitor = None
             # the next trajectory continues from here; until it comes, the gap is watched
             self._continue_from = targets[-1].copy()
-            self._continue_tail = np.vstack([q_before, targets])[-2:].copy()
+            self._continue_tail = monitor.tail()  # as sent (a stream resumed from rest is re-timed)
             self._gap_task = asyncio.create_task(self._watch_gap(), name="robot-continuation-watch")
             return res
 
@@ -365,13 +382,37 @@ class RobotDriver(Supervision):
         try:
             self.limits.check_accelerations(targets, period, q_before)
         except LimitViolationError as exc:
-            if not following and bool(np.any(np.abs(traj.velocities[0]) > 1e-9)):
+            if following:
+                raise
+            if bool(np.any(np.abs(traj.velocities[0]) > 1e-9)):
                 raise ContinuationLateError(
                     f"{exc}: it continues a motion that has already ended (the arm is at rest); "
                     "plan it again from rest"
                 ) from exc
-            raise
+            targets = self._eased_in(q_now, targets, traj, period, exc)
         return targets, q_before, following
+
+    def _eased_in(
+        self, q_now: np.ndarray, targets: np.ndarray, traj: JointTrajectory, period: float, exc: Exception
+    ) -> np.ndarray:
+        """A plan from rest that starts a hair off the measured joints, eased in from where the arm is.
+
+        A time-optimal plan starts at full acceleration, so an arm that settled a few thousandths of a
+        degree from the plan's start (well within the start tolerance) turns the first targets into a
+        step beyond the acceleration limit. When the plan passes from its own start, the offset is faded
+        out over its first targets (:func:`ease_in_offset`, every target checked again); a plan beyond
+        the limits from its own start is refused as it is (``exc``)."""
+        start = np.asarray(traj.positions[0], dtype=float)
+        try:
+            self.limits.check_accelerations(targets, period, np.vstack([start, start]))
+            eased = ease_in_offset(q_now, start, targets, period, self.limits)
+        except LimitViolationError:
+            raise exc from None
+        log.info(
+            "trajectory eased in: it starts %.4f° off the measured joints",
+            float(np.rad2deg(np.max(np.abs(q_now - start)))),
+        )
+        return eased
 
     async def _stream(
         self, targets: np.ndarray, period: float, monitor: StreamMonitor, wait_done: bool = True
@@ -379,16 +420,25 @@ class RobotDriver(Supervision):
         """Send ServoJ targets, keeping at most ``servo_lookahead`` queued ahead of the one the
         controller is executing (flow control by CurrentCommandId from the feedback stream).
         Pacing therefore follows the controller's own clock — real time on hardware, any speed
-        in the simulator — and the controller never starves nor builds a long queue."""
+        in the simulator — and the controller never starves nor builds a long queue.
+
+        A target that would be a step in speed were the controller to have run dry when it arrives is
+        sent only while the controller cannot run dry for another margin (:meth:`_send_margin_ms`: a
+        fixed one, or what recent sends took) by the schedule of what it holds
+        (:meth:`StreamMonitor.dry_at_ms`); the window of targets in hand grows to keep that margin. Otherwise (the host fell
+        behind) nothing is sent until the controller rests at the last target, and the rest of the
+        stream is re-timed from rest (:func:`services.robot.resume.retime_from_rest`): no target ever
+        reaches a controller that has stopped as a step from rest."""
         loop = asyncio.get_running_loop()
         t0 = loop.time()
-        window = self.settings.robot.servo_lookahead
+        base = self.settings.robot.servo_lookahead
         if not wait_done:  # the next trajectory's request comes in while these run: more in hand
-            window += CONTINUE_EXTRA_TARGETS
-        window = max(window, round(window * self.clock_rate.rate))
+            base += CONTINUE_EXTRA_TARGETS
         ids: list[int | None] = []
-        for k, q in enumerate(targets):
-            fresh = False  # a packet that came after the decision to send began
+        resumed = 0
+        via_rest = False  # the host fell behind: let the controller run dry, then resume from rest
+        k = 0
+        while k < len(targets):
             while True:
                 fb = self.feedback
                 if self._abort.is_set() and not (fb.estop or self._abort_by_estop):
@@ -400,29 +450,115 @@ class RobotDriver(Supervision):
                     raise ControllerError(
                         f"controller alarm during trajectory step {k}: {text}", alarms=tuple(alarm_ids)
                     )
-                edge = monitor.targets_sent > 0 and monitor.unstarted(fb.current_command_id) == 0
-                if (edge and not fresh) or time.time_ns() - fb.received_ns > STALE_FEEDBACK_NS:
-                    # after a stall, or with nothing left in hand: decide on the arm's state now (the
-                    # controller may have run dry since the packet in hand)
+                if time.time_ns() - fb.received_ns > STALE_FEEDBACK_NS:
+                    # after a stall: decide on the arm's state now (the packets that queued meanwhile
+                    # are read first; the controller may have run dry since the packet in hand)
                     await self.client.next_feedback()
-                    fresh = True
                     continue
                 if monitor.fault is not None:  # tripped: the monitored run cuts this task, stops the arm
                     await asyncio.Event().wait()
-                if monitor.unstarted(fb.current_command_id) < window:
-                    break
+                held = monitor.unstarted(fb.current_command_id)
+                # the margin the host needs, and enough targets in hand to keep it
+                margin_ms = self._send_margin_ms()
+                window = min(
+                    MAX_WINDOW,
+                    max(base, round(base * self.clock_rate.rate), ceil(2 * margin_ms / (1000 * period))),
+                )
+                if via_rest:
+                    if held == 0 and fb.robot_mode != RobotMode.RUNNING:  # at rest at the last target
+                        targets = np.vstack([targets[:k], self._resume(monitor, targets[k:], period, k)])
+                        resumed += 1
+                        via_rest = False
+                        monitor.owed = True
+                        break
+                elif held < window:
+                    if monitor.targets_sent == 0 or self._safe_from_rest(monitor, targets[k], period):
+                        break  # (a fresh stream's first targets leave in one write: queued together)
+                    ahead_ms = monitor.dry_at_ms(fb) - self._controller_now_ms(fb)
+                    if ahead_ms >= margin_ms:
+                        break
+                    via_rest = True
+                    # the arm is let come to rest at the last target: not a starved stream, until resumed
+                    monitor.owed = False
+                    log.warning(
+                        "ServoJ stream fell behind at step %d/%d (the controller may run dry %.0f ms from "
+                        "now): resuming it from rest",
+                        k + 1,
+                        len(targets),
+                        ahead_ms,
+                    )
+                    continue
                 await self.client.next_feedback()
-            rid = await self.client.servo_j(q, period)
-            ids.append(rid)
-            monitor.sent(q, rid)
+            # pipelined: the targets that fill the window go out together, none waits for another's reply
+            batch = targets[k : k + max(1, window - monitor.unstarted(fb.current_command_id))]
+            if log.isEnabledFor(logging.DEBUG):
+                log.debug(
+                    "ServoJ %d-%d/%d: %d in hand, dry at %.0f ms, controller now ~%.0f ms",
+                    k + 1,
+                    k + len(batch),
+                    len(targets),
+                    monitor.unstarted(fb.current_command_id),
+                    monitor.dry_at_ms(fb),
+                    self._controller_now_ms(fb),
+                )
+            rids = await self._send_targets(batch, period)
+            self._send_lags_ms.append((time.time_ns() - fb.received_ns) / 1e6 * self.clock_rate.rate)
+            for q, rid in zip(batch, rids, strict=True):
+                ids.append(rid)
+                monitor.sent(q, rid, fb.timestamp_ms)
+                k += 1
+        wait_done = wait_done or monitor.ends_slowed
         monitor.owed = not wait_done  # a stream that ends may run dry; a continuing one must not
         if not wait_done:  # the next trajectory continues the queue: the last target is the result
             self._continue_id = ids[-1]
-            return MoveResult(targets[-1].copy(), loop.time() - t0, 1)
+            return MoveResult(targets[-1].copy(), loop.time() - t0, 1, resumed=resumed)
         fb = await self.client.wait_motion_done(
             ids[-1], max(self.settings.robot.motion_timeout_s, 2 * period)
         )
-        return MoveResult(fb.q.copy(), loop.time() - t0, 1)
+        return MoveResult(fb.q.copy(), loop.time() - t0, 1, resumed=resumed)
+
+    async def _send_targets(self, batch: np.ndarray, period: float) -> list[int | None]:
+        """ServoJ targets in one write where the link can (they reach the controller together)."""
+        if isinstance(self.client, PipelinedServo):
+            return await self.client.servo_j_many(list(batch), period)
+        return [await self.client.servo_j(q, period) for q in batch]
+
+    def _safe_from_rest(self, monitor: StreamMonitor, q: np.ndarray, period: float) -> bool:
+        """Whether ``q`` is within the limits even as a step from rest at the stream's last target."""
+        last = monitor.tail()[-1]
+        try:
+            self.limits.check_velocities(q[None], period, q_start=last)
+            self.limits.check_accelerations(q[None], period, np.vstack([last, last]))
+        except LimitViolationError:
+            return False
+        return True
+
+    def _send_margin_ms(self) -> float:
+        """How long (controller ms) the controller must still hold targets when one that would be a step
+        from rest is sent: ``RESUME_MARGIN_S``, or ``LAG_FACTOR`` × the longest recent send."""
+        learned = LAG_FACTOR * max(self._send_lags_ms, default=0.0)
+        return max(RESUME_MARGIN_S * 1000.0 * self.clock_rate.rate, learned)
+
+    def _controller_now_ms(self, fb: FeedbackState) -> float:
+        """The controller clock now, from the packet in hand and the host time since it came."""
+        return fb.timestamp_ms + (time.time_ns() - fb.received_ns) / 1e6 * self.clock_rate.rate
+
+    def _resume(self, monitor: StreamMonitor, remaining: np.ndarray, period: float, k: int) -> np.ndarray:
+        """The controller rests at the stream's last target: the rest of it, re-timed from rest."""
+        try:
+            res = retime_from_rest(monitor.tail()[-1], remaining, period, self.limits)
+        except LimitViolationError as exc:
+            raise ExecutionError(f"the ServoJ stream ran dry at step {k}; {exc}; arm at rest") from exc
+        monitor.from_rest()
+        monitor.ends_slowed = not res.reaches_plan
+        self.stream_resumes += 1
+        log.warning(
+            "ServoJ stream resumed from rest at step %d: %d targets left re-timed (%.2f s ramp)",
+            k + 1,
+            len(res.targets),
+            res.ramp_s,
+        )
+        return res.targets
 
     async def _guarded(
         self, targets: np.ndarray, period: float, stop_when: StopCondition, monitor: StreamMonitor

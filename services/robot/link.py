@@ -10,8 +10,8 @@ brand brings a link, never a copy of the checks. Feedback is presented in the dr
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Protocol
+from collections.abc import Callable, Sequence
+from typing import Protocol, runtime_checkable
 
 from numpy.typing import ArrayLike
 
@@ -76,3 +76,11 @@ class ControllerLink(Protocol):
     async def digital_output(
         self, index: int, on: bool, tool: bool = False, queued: bool = True
     ) -> int | None: ...
+
+
+@runtime_checkable
+class PipelinedServo(Protocol):
+    """A link that can send several ServoJ targets in one write (the controller receives them
+    together); the driver uses it when a link offers it, else one ``servo_j`` after another."""
+
+    async def servo_j_many(self, qs: Sequence[ArrayLike], t_s: float) -> list[int | None]: ...

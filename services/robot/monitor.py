@@ -88,18 +88,52 @@ class StreamMonitor:
         self._wall_s = wall_s
         self._points: list[np.ndarray] = [np.asarray(q_start, dtype=float).copy()]
         self._ids: list[int | None] = []  # the queue ID of each target (points[i + 1])
+        self._t_s: list[float] = []  # each target's ServoJ ``t``
+        # the segment: the targets since the stream last started from rest; the controller cannot have
+        # started its first before ``_anchor_ms`` (a packet that came before it did), and executes its
+        # targets back to back at best, so it cannot run dry before the anchor plus their ``t``s
+        self._segment = 0  # targets sent before the segment
+        self._anchor_ms: float | None = None
+        self._segment_s = 0.0
         self._done = 0  # targets (from the oldest kept) the controller has started
         self._dropped = 0  # targets pruned from the front (executed long ago)
         self.owed = True  # the host still owes targets: the controller must not run dry
+        self.ends_slowed = False  # resumed from rest, the stream ends slower than planned (at rest)
         self.fault: ExecutionError | None = None
         self.max_path_deviation_rad = 0.0
         self._starved_at: tuple[int, float] | None = None  # (controller ms, host s) of running dry
 
     # ------------------------------------------------------------------ the host's side
-    def sent(self, q: np.ndarray, rid: int | None) -> None:
+    def sent(self, q: np.ndarray, rid: int | None, stamp_ms: int | None = None) -> None:
+        """A target left (``stamp_ms``: the controller clock of the newest packet before it did)."""
+        if self.targets_sent == self._segment and stamp_ms is not None:
+            self._anchor_ms = float(stamp_ms)
         self._points.append(np.asarray(q, dtype=float).copy())
         self._ids.append(rid)
+        self._t_s.append(self.period_s)
+        self._segment_s += self.period_s
         self._starved_at = None
+
+    def from_rest(self) -> None:
+        """The stream starts again from rest (the controller ran dry and holds the last target)."""
+        self._segment = self.targets_sent
+        self._anchor_ms = None
+        self._segment_s = 0.0
+
+    def dry_at_ms(self, fb: FeedbackState) -> float:
+        """The earliest controller time at which the controller can have run out of the targets sent: the
+        packet's stamp plus the ``t`` of those it had not started, or the segment's anchor plus the ``t``
+        of all its targets (executed back to back), whichever is later. A lower bound: a target that
+        arrives late only delays the rest."""
+        k = self._executing(fb.current_command_id)
+        held = fb.timestamp_ms + 1000.0 * sum(self._t_s[k + 1 :])
+        if self._anchor_ms is None:
+            return held
+        return max(held, self._anchor_ms + 1000.0 * self._segment_s)
+
+    def tail(self) -> np.ndarray:
+        """The last two positions of the stream (the start twice when nothing was sent), oldest first."""
+        return np.vstack(self._points[-2:] if len(self._points) > 1 else self._points * 2)
 
     @property
     def targets_sent(self) -> int:
@@ -125,6 +159,8 @@ class StreamMonitor:
         if self.fault is not None:
             return self.fault
         k = self._executing(fb.current_command_id)
+        if self._anchor_ms is not None and self._dropped + k < self._segment:
+            self._anchor_ms = max(self._anchor_ms, float(fb.timestamp_ms))  # its first not started yet
         if self._ids and all(r is not None for r in self._ids):
             lo = max(0, k - LAG_TARGETS)
             dev = path_deviation(fb.q, self._points[lo : k + 2])
@@ -172,6 +208,7 @@ class StreamMonitor:
         if cut > 64:
             del self._points[:cut]
             del self._ids[:cut]
+            del self._t_s[:cut]
             self._done -= cut
             self._dropped += cut
 

@@ -188,7 +188,7 @@ async def test_feedback_rate_and_slow_port(sim_server):
         assert 7 <= statistics.median(steps) <= 9, str(steps)
         assert c.packets_received - n0 >= 40
     slow = DobotClient(
-        "127.0.0.1", sim_server.ports["dashboard"], sim_server.ports["slow"], feedback_timeout_s=0.5
+        "127.0.0.1", sim_server.ports["dashboard"], sim_server.ports["slow"], feedback_timeout_s=5.0
     )
     async with slow:
         steps = await _controller_periods_ms(slow, 4)
@@ -225,3 +225,30 @@ async def test_wait_on_a_stopped_controller_clock_is_a_link_error(sim_server):
         # the clock thread blocks on the controller's lock: packets stop, the clock with them
         with sim_server.lock, pytest.raises(RobotCommunicationError):
             await c.wait_controller(lambda fb: False, 0.5, wall_guard_s=0.3)
+
+
+async def test_pipelined_servoj_reach_the_controller_together_and_replies_keep_their_order(sim_server):
+    async with make_client(sim_server) as c:
+        await c.enable()
+        q0 = await c.get_angles()
+        targets = [q0 + np.deg2rad([0.2 * k, 0, 0, 0, 0, 0]) for k in range(1, 9)]
+        with sim_server.lock:
+            n_log = len(sim_server.controller.command_log)
+        ids = await c.servo_j_many(targets, 0.03)
+        assert all(i is not None for i in ids) and ids == list(range(ids[0], ids[0] + 8))
+        with sim_server.lock:
+            arrived = [
+                ms
+                for ms, text in list(sim_server.controller.command_log)[n_log:]
+                if text.startswith("ServoJ")
+            ]
+        # one write: the controller parsed all eight within less than one target's t of its own clock,
+        # so none can have found it run dry
+        assert len(arrived) == 8 and arrived[-1] - arrived[0] < 30
+        fb = await c.wait_motion_done(ids[-1], 10.0)
+        assert np.allclose(fb.q, targets[-1], atol=1e-6)
+        # the first refused (a disabled controller refuses motion) fails the call as request() would
+        await c.disable()
+        with pytest.raises(ControllerError, match="ServoJ"):
+            await c.servo_j_many(targets[:2], 0.03)
+        assert await c.robot_mode() == RobotMode.DISABLED  # the stream stays usable afterwards

@@ -325,11 +325,17 @@ async def test_a_host_that_stops_feeding_servoj_is_halted_by_the_controller_watc
         async with watcher:
             await host.connect()
             await host.enable()
-            # pipelined, as a look-ahead goes out: the 8 commands reach the controller together
+            # pipelined, as a look-ahead goes out: the 8 commands reach the controller in one write
             targets = [HOME + np.deg2rad([0.5 * k, 0, 0, 0, 0, 0]) for k in range(1, 9)]
-            ids = await asyncio.gather(*(host.servo_j(q, 0.05) for q in targets))
+            ids = await host.servo_j_many(targets, 0.05)
             await host.close()  # the host dies with 8 targets (0.4 s) queued
-            fb = await watcher.wait_feedback(lambda f: f.robot_mode == RobotMode.ENABLE, 5.0)
+            assert None not in ids
+            first_id = min(i for i in ids if i is not None)
+            # halted: enabled and idle again once the stream has begun (a feedback packet composed
+            # before the targets were queued says ENABLE too)
+            fb = await watcher.wait_feedback(
+                lambda f: f.robot_mode == RobotMode.ENABLE and f.current_command_id >= first_id, 5.0
+            )
             assert ctl.servo_watchdog_trips >= 1
             assert ids[-1] is not None and fb.current_command_id < ids[-1]
             assert np.rad2deg(fb.q[0] - HOME[0]) < 4.0 - 0.5  # halted short of the last target

@@ -94,6 +94,10 @@ class StallingLink:
             await asyncio.Event().wait()  # stalled for good
         return await self._link.servo_j(q, t_s)
 
+    async def servo_j_many(self, qs: Any, t_s: float) -> list[int | None]:
+        """The driver's pipelined batch, one target after another (so the stall falls inside it)."""
+        return [await self.servo_j(q, t_s) for q in qs]
+
 
 async def test_a_driver_stalled_mid_stream_stops_the_arm_once_the_controller_runs_dry(driver, holding_sim):
     real = driver.client
@@ -204,7 +208,13 @@ async def test_the_sim_apps_controller_halts_a_stream_whose_host_died(sim_server
         targets = [HOME + np.deg2rad([1.0 * k, 0, 0, 0, 0, 0]) for k in range(1, 11)]
         ids = await asyncio.gather(*(host.servo_j(q, 0.1) for q in targets))
         await host.close()  # dies with 10 targets (1 s of motion) queued
-        fb = await watcher.wait_feedback(lambda f: f.robot_mode == RobotMode.ENABLE, 5.0)
+        assert None not in ids
+        first_id = min(i for i in ids if i is not None)
+        # halted: enabled and idle again once the stream has begun (a feedback packet composed
+        # before the targets were queued says ENABLE too)
+        fb = await watcher.wait_feedback(
+            lambda f: f.robot_mode == RobotMode.ENABLE and f.current_command_id >= first_id, 5.0
+        )
         assert ctl.servo_watchdog_trips == 1
         assert ids[-1] is not None and fb.current_command_id < ids[-1]
         last_servo_ms = max(ms for ms, text in ctl.command_log if text.startswith("ServoJ"))

@@ -24,6 +24,7 @@ import concurrent.futures
 import contextlib
 import logging
 import random
+import re
 import threading
 import time
 from collections import deque
@@ -50,6 +51,7 @@ from services.robot.ur import rtde_api
 from services.robot.ur.feedback import URSample, describe, to_feedback
 from services.robot.ur.io_client import RTDEOutputs
 from services.robot.ur.stream import FeedbackStream
+from services.rtde.codes import SafetyMode
 
 log = logging.getLogger("pickplace.robot.ur")
 
@@ -57,10 +59,20 @@ T = TypeVar("T")
 POLL_S = 0.0005  # the poller looks for a new sample 4x per 2 ms cycle
 SERVO_LOOKAHEAD_S = 0.1  # ur_rtde accepts 0.03-0.2
 SERVO_GAIN = 300  # ur_rtde accepts 100-2000
+# A stream's end: servoStop once the controller's reference is at the last target, or this long (of
+# controller time) after that target's t at most
+SERVO_END_TOLERANCE_RAD = 1e-5
+SERVO_END_GRACE_S = 0.2
 STOP_DECEL_RAD_S2 = 4.0
 TOOL_SPEED_MAX_M_S = 1.0  # what a 100 % MovL ratio asks of the tool
 TOOL_ACC_MAX_M_S2 = 2.5
 ENABLE_TIMEOUT_S = 30.0  # controller time for power on + brake release (a real arm takes ~15 s)
+# After a stop the arm still brakes (and a physical one settles behind its reference): it counts as
+# moving, as a Dobot reports RUNNING, until no joint turns faster than this, or for at most so long
+REST_SPEED_RAD_S = 0.01
+# "Cannot unlock protective stop until 5s after occurrence. …": the controller's own unlock delay
+UNLOCK_TOO_EARLY = re.compile(r"^Cannot unlock protective stop until (\d+(?:\.\d+)?)s after occurrence")
+STOP_SETTLE_MAX_S = 1.0
 
 
 RUNNING_WORDS = "Robotmode: RUNNING"  # the dashboard's answer once the brakes are released
@@ -111,6 +123,8 @@ class URLink(FeedbackStream):
         self._servo_sent_ms = 0
         self._servo_busy = False
         self._estop_latched = False
+        self._stopping_since_s: float | None = None  # controller time of a stop the arm still brakes from
+        self._protective_since_ms: int | None = None  # controller time the protective stop was first seen
         self._reconnect_task: asyncio.Task[None] | None = None
         self.samples = 0
 
@@ -197,6 +211,7 @@ class URLink(FeedbackStream):
             or self._servo_sent is not None
             or bool(self._servo_queue)
             or self._servo_busy
+            or self._stopping_since_s is not None
         )
 
     def _on_sample(self, s: URSample) -> None:
@@ -209,6 +224,11 @@ class URLink(FeedbackStream):
             status = self._io.async_status()
             if status is not None and (status[1] != op or not status[0]):
                 self._move = None
+        if self._stopping_since_s is not None and (
+            max(abs(v) for v in s.qd) < REST_SPEED_RAD_S
+            or s.timestamp_s - self._stopping_since_s > STOP_SETTLE_MAX_S
+        ):
+            self._stopping_since_s = None
         fb = to_feedback(
             s,
             moving=self._moving(),
@@ -217,6 +237,10 @@ class URLink(FeedbackStream):
         )
         if fb.in_error or fb.estop:  # the controller halted: nothing queued here will run
             self._abandon_motion()
+        if s.safety_mode != SafetyMode.PROTECTIVE_STOP:
+            self._protective_since_ms = None
+        elif self._protective_since_ms is None:
+            self._protective_since_ms = fb.timestamp_ms
         self._publish(fb)
         self._pump_servo(fb)
 
@@ -264,6 +288,7 @@ class URLink(FeedbackStream):
     def _abandon_motion(self) -> None:
         self._servo_queue.clear()
         self._servo_sent = None
+        self._stopping_since_s = None
         if self._move is not None:
             self._move = None
 
@@ -328,15 +353,25 @@ class URLink(FeedbackStream):
         await self._call("power off", lambda: self._io.dashboard("power off"))
 
     async def clear_error(self) -> None:
+        """Unlock a protective stop; one asked for before the controller's unlock delay has run (5 s
+        on an e-Series) waits for it on the controller's clock, from when the stop was first seen."""
         reply = await self._call(
             "unlock protective stop", lambda: self._io.dashboard("unlock protective stop")
         )
+        early = UNLOCK_TOO_EARLY.match(reply)
+        if early is not None:
+            await self.wait_controller_time(float(early.group(1)), since_ms=self._protective_since_ms)
+            reply = await self._call(
+                "unlock protective stop", lambda: self._io.dashboard("unlock protective stop")
+            )
         if reply != "Protective stop releasing":
             raise ControllerError(f"UR {self.host} refused to unlock the protective stop: {reply}")
         await self._call("close safety popup", lambda: self._io.dashboard("close safety popup"))
 
     async def stop(self) -> None:
         self._abandon_motion()
+        if self._sample is not None:  # moving (RUNNING) until the arm is at rest
+            self._stopping_since_s = self._sample.timestamp_s
         self._next_id += 1
         self.current_command_id = self._next_id  # everything issued before the stop is over
         await self._call("stop", lambda: self._io.stop(STOP_DECEL_RAD_S2))
@@ -429,6 +464,13 @@ class URLink(FeedbackStream):
         sent = self._servo_sent
         if sent is not None and fb.timestamp_ms < self._servo_sent_ms + sent.t_s * 1000.0 - 1e-6:
             return
+        if (
+            sent is not None
+            and not self._servo_queue
+            and float(np.max(np.abs(fb.q_target - sent.q))) > SERVO_END_TOLERANCE_RAD
+            and fb.timestamp_ms < self._servo_sent_ms + (sent.t_s + SERVO_END_GRACE_S) * 1000.0
+        ):
+            return  # the controller still runs the last target (it took it up late): servoStop would cut it
         if sent is not None:
             self._servo_sent = None
         if not self._servo_queue:
@@ -445,15 +487,18 @@ class URLink(FeedbackStream):
 
     async def _servo_send(self, item: _Servo) -> None:
         try:
-            ok = await self._call(
-                "servoJ",
-                lambda: self._io.control_call(
-                    "servoJ", item.q.tolist(), 0.0, 0.0, item.t_s, SERVO_LOOKAHEAD_S, SERVO_GAIN
-                ),
+            ok, stamp_s = await self._call(
+                "servoJ", lambda: self._io.servo(item.q.tolist(), item.t_s, SERVO_LOOKAHEAD_S, SERVO_GAIN)
             )
             if not ok:
                 log.warning("UR %s refused servoJ %d", self.host, item.id)
                 self._abandon_motion()
+            elif self._servo_sent is item:
+                # its t runs from when it reached the controller (its clock then, not the older packet
+                # this loop last handled), not from when it was queued here: a call held up by a busy
+                # host would otherwise have the next target follow it too soon, and the script's servo
+                # thread take up only the newer of the two (a step in speed)
+                self._servo_sent_ms = max(self._servo_sent_ms, round(stamp_s * 1000.0))
         except RobotCommunicationError as exc:
             log.warning("servoJ %d not sent: %s", item.id, exc)
             self._abandon_motion()

@@ -151,6 +151,13 @@ class Interfaces:
     def control_call(self, name: str, *args: Any) -> Any:
         return getattr(self._control(), name)(*args)
 
+    def servo(self, q: list[float], t_s: float, lookahead_s: float, gain: float) -> tuple[bool, float]:
+        """servoJ, and the controller's clock (s) right after it returned: read from the receive
+        interface, which ur_rtde's own thread keeps current however busy Python is."""
+        ok = bool(self._control().servoJ(q, 0.0, 0.0, t_s, lookahead_s, gain))
+        r = self.receive
+        return ok, float(r.getTimestamp()) if r is not None else 0.0
+
     def dashboard(self, command: str) -> str:
         if self.db is None:
             raise RuntimeError("the dashboard is not connected")

@@ -1,0 +1,149 @@
+"""A ServoJ stream whose controller ran dry (the host fell behind) is never continued with a step from
+rest: the driver lets the arm rest at its last target and re-times the rest of the stream from rest.
+
+The pure parts (the re-timing, the schedule of what the controller holds) with fixtures; the whole over
+real sockets with a host that stalls until the controller has run dry, every command on the wire
+checked independently through the bench's recording proxy."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import AsyncIterator
+from typing import Any
+
+import numpy as np
+import pytest
+
+from bench.bench_robot import RecordingProxy, limit_violations
+from services.common.errors import LimitViolationError
+from services.common.settings import WorkspaceBounds
+from services.dobot import RobotMode
+from services.kinematics.interpolation import quintic_move
+from services.kinematics.robot_models import NOVA5
+from services.kinematics.trajectory import JointLimits
+from services.robot.client import FeedbackState
+from services.robot.driver import RobotDriver
+from services.robot.monitor import StreamMonitor
+from services.robot.resume import retime_from_rest, warp
+from services.robot.safety import SafetyLimits
+from services.robot.service import build_driver
+from tests.conftest import HOME
+
+PERIOD = 0.03
+LIMITS = SafetyLimits(NOVA5, WorkspaceBounds())
+
+
+def _plan_at_speed() -> np.ndarray:
+    """ServoJ targets of a move at the arm's limits (a quintic over 60° of joint 1)."""
+    lim = JointLimits.from_spec(NOVA5, 1.0, 1.0)
+    traj = quintic_move(
+        HOME, HOME + np.deg2rad([60, 0, 0, 0, 0, 0]), joint_names=NOVA5.joint_names, limits=lim
+    )
+    n = int(np.ceil(traj.duration / PERIOD))
+    return np.atleast_2d(
+        traj.sample(np.minimum(np.arange(1, n + 1) * PERIOD, traj.duration), derivatives=0)[0]
+    )
+
+
+def test_the_warp_rises_from_rest_and_then_falls_on_the_plans_targets():
+    u = warp(16, 4, 12.0)
+    assert 0 < u[0] < 0.05  # the first step from rest is tiny
+    assert np.all(np.diff(u) > 0) and np.all(np.diff(u) <= 1.0 + 1e-12)  # never faster than the plan
+    assert np.allclose(u[7:11], [4, 5, 6, 7])  # from 2 × 4 periods on: the plan's own targets
+    assert u[-1] == 12.0
+
+
+def test_the_rest_of_a_stream_at_speed_resumes_within_the_limits_and_ends_on_the_plan():
+    targets = _plan_at_speed()
+    k = len(targets) // 2  # mid-way, at full speed
+    with pytest.raises(LimitViolationError):  # as it was: a step from rest
+        LIMITS.check_accelerations(targets[k : k + 1], PERIOD, np.vstack([targets[k - 1]] * 2))
+    res = retime_from_rest(targets[k - 1], targets[k:], PERIOD, LIMITS)
+    LIMITS.check_accelerations(res.targets, PERIOD, np.vstack([targets[k - 1]] * 2))
+    LIMITS.check_velocities(res.targets, PERIOD, q_start=targets[k - 1])
+    assert np.array_equal(res.targets[-1], targets[-1])
+    assert res.reaches_plan and np.allclose(res.targets[-2:], targets[-2:])
+    assert len(res.targets) > len(targets) - k  # slower than the plan while it ramps
+
+
+def test_a_stream_too_short_to_reach_its_plan_says_so():
+    targets = _plan_at_speed()
+    k = len(targets) // 2  # two targets left of a stream that goes on at speed (a continuing one)
+    res = retime_from_rest(targets[k - 1], targets[k : k + 2], PERIOD, LIMITS)
+    assert not res.reaches_plan and np.array_equal(res.targets[-1], targets[k + 1])
+
+
+def _fb(stamp_ms: int, current_id: int, mode: RobotMode = RobotMode.RUNNING) -> FeedbackState:
+    z = np.zeros(6)
+    return FeedbackState(
+        q=HOME.copy(), qd=z, q_target=HOME.copy(), T_base_tool=np.eye(4), tcp_force=z, robot_mode=int(mode),
+        current_command_id=current_id, digital_inputs=0, digital_outputs=0, enabled=True, error=False,
+        collision=False, running=mode == RobotMode.RUNNING, estop=False, timestamp_ms=stamp_ms, received_ns=0,
+    )  # fmt: skip
+
+
+def test_the_schedule_of_what_the_controller_holds_is_a_lower_bound_on_running_dry():
+    m = StreamMonitor(HOME, PERIOD, 0.05, 0.25)
+    for rid in (11, 12, 13, 14):  # sent together on the packet stamped 1000
+        m.sent(HOME, rid, stamp_ms=1000)
+    m.on_feedback(_fb(1008, 10))  # not started yet: the first cannot start before 1008
+    assert m.dry_at_ms(_fb(1008, 10)) == pytest.approx(1008 + 4 * 30)
+    fb = _fb(1080, 13)  # executing the third: one left unstarted, but the schedule says more
+    m.on_feedback(fb)
+    assert m.unstarted(13) == 1
+    assert m.dry_at_ms(fb) == pytest.approx(1128)
+    m.from_rest()  # a new segment: only what is held counts until its first target is sent
+    assert m.dry_at_ms(_fb(1300, 14, RobotMode.ENABLE)) == pytest.approx(1300)
+
+
+# ---------------------------------------------------------------------- over real sockets
+@pytest.fixture
+async def proxied(robot_settings: Any, sim_server: Any) -> AsyncIterator[tuple[RobotDriver, RecordingProxy]]:
+    async with RecordingProxy(sim_server.ports["dashboard"], sim_server.ports["feedback"]) as proxy:
+        r = robot_settings.robot.model_copy(
+            update={"dashboard_port": proxy.ports["dashboard"], "feedback_port": proxy.ports["feedback"]}
+        )
+        d = build_driver(robot_settings.model_copy(update={"robot": r}))
+        await d.start()
+        await d.enable()
+        yield d, proxy
+        await d.close()
+        await d.client.close()
+
+
+def _stall_until_dry(sim: Any, driver: RobotDriver, after_targets: int) -> None:
+    """A listener that freezes the host (the driver's event loop) once ``after_targets`` ServoJ have
+    gone out, until the controller has run out of targets and rests (its own state, read in-process)."""
+    fired = False
+
+    def listener(fb: FeedbackState) -> None:
+        nonlocal fired
+        monitor = driver._monitor
+        if fired or not isinstance(monitor, StreamMonitor) or monitor.targets_sent < after_targets:
+            return
+        fired = True
+        deadline = time.monotonic() + 30.0  # a safety net only: the controller's own state ends it
+        while time.monotonic() < deadline:
+            with sim.lock:
+                if sim.controller.mode == RobotMode.ENABLE:
+                    return
+            time.sleep(0.002)  # the stalled host: the loop stands still while the controller runs
+
+    driver.client.add_listener(listener)
+
+
+@pytest.mark.integration
+async def test_a_stream_that_ran_dry_resumes_from_rest_and_nothing_on_the_wire_is_a_step(proxied, sim_server):
+    driver, proxy = proxied
+    lim = JointLimits.from_spec(driver.spec, 1.0, 1.0)
+    q0 = driver.joint_positions()
+    goal = q0 + np.deg2rad([50, 0, 0, 0, 0, 0])
+    traj = quintic_move(q0, goal, joint_names=driver.spec.joint_names, limits=lim)
+    _stall_until_dry(sim_server, driver, after_targets=int(traj.duration / PERIOD) // 2)  # at full speed
+    res = await driver.execute_trajectory(traj, PERIOD)
+    assert res.resumed >= 1 and driver.stream_resumes >= 1
+    assert np.max(np.abs(res.final_q - goal)) < driver.settings.robot.goal_tolerance_rad
+    bad, n, examples = limit_violations(proxy.commands, driver.limits)
+    assert n > 10 and bad == 0, examples
+    with sim_server.lock:  # the controller never alarmed (no overspeed) and ran the re-timed stream
+        assert not sim_server.controller.alarms
