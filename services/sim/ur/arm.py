@@ -66,6 +66,7 @@ class ArmMotion:
         self._profile: Profile | None = None
         self._t = 0.0
         self._servo_target: np.ndarray | None = None
+        self._servo_next: tuple[np.ndarray, float] | None = None  # given while a servoj's t still runs
         self._speed_target = z.copy()
         self._accel = 1.0
         self.T_flange_tcp = np.eye(4)
@@ -129,14 +130,19 @@ class ArmMotion:
         )
 
     def servoj(self, q: np.ndarray, t: float) -> None:
-        """Track ``q``, reached ``t`` seconds after it was given (each new target restarts the clock)."""
+        """Track ``q``, reached ``t`` seconds after the servoj running now has had its ``t``: URScript's
+        servoj blocks for ``t``, so the script's servo thread takes up a target given meanwhile once the
+        running one's time is over (the newest then, as its one target variable holds)."""
         q = self.check_joints(q, "servoj")
         t = max(float(t), 0.002)
-        self._check_speed((q - self.ref.q) / t, "servoj")
         same = self._servo_target is not None and np.array_equal(q, self._servo_target)
         if self.kind is MotionKind.SERVOJ and same:
             return  # the script's servo thread repeats the same target every cycle
         self._servo_target = q.copy()
+        if self.kind is MotionKind.SERVOJ and self._profile is not None and self._t < self._profile.duration:
+            self._servo_next = (q.copy(), t)
+            return
+        self._check_speed((q - self.ref.q) / t, "servoj")
         self._start(MotionKind.SERVOJ, LinearInTime(self.ref.q, q, t))
 
     def speedj(self, qd: np.ndarray, a: float) -> None:
@@ -151,16 +157,18 @@ class ArmMotion:
         if self.kind is MotionKind.IDLE:
             return
         self._accel = max(a, 1e-4)
-        self.kind, self._profile = MotionKind.STOP, None
+        self.kind, self._profile, self._servo_next = MotionKind.STOP, None, None
 
     def halt(self) -> None:
         """Standstill at once (protective stop, e-stop, power off)."""
         self.kind, self._profile, self._servo_target = MotionKind.IDLE, None, None
+        self._servo_next = None
         self.ref.qd[:] = 0.0
         self.ref.qdd[:] = 0.0
 
     def _start(self, kind: MotionKind, profile: Profile) -> None:
         self.kind, self._profile, self._t = kind, profile, 0.0
+        self._servo_next = None
 
     # ------------------------------------------------------------ time
     def step(self, dt: float) -> None:
@@ -175,6 +183,12 @@ class ArmMotion:
                 self.ref.qdd[:] = 0.0
                 if self.kind is not MotionKind.SERVOJ:  # servoj holds its last target until stopped
                     self.kind, self._profile = MotionKind.IDLE, None
+                elif self._servo_next is not None:  # the servo thread's next servoj, on schedule
+                    q_next, t_next = self._servo_next
+                    carry = self._t - self._profile.duration
+                    self._check_speed((q_next - self.ref.q) / t_next, "servoj")
+                    self._start(MotionKind.SERVOJ, LinearInTime(self.ref.q, q_next, t_next))
+                    self._t = carry
         elif self.kind is MotionKind.SPEEDJ:
             dv = self._speed_target - self.ref.qd
             lim = self._accel * dt

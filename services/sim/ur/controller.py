@@ -68,6 +68,7 @@ class URController:
         self.arm = ArmMotion(spec, q0)
         self.q = q0.copy()
         self.qd = np.zeros(spec.dof)
+        self.tcp_force = np.zeros(6)  # N, N·m in the base frame
         self.timestamp_s = 0.0
         self.robot_mode = URRobotMode.RUNNING if self.config.start_powered else URRobotMode.POWER_OFF
         self.safety_mode = SafetyMode.NORMAL
@@ -77,6 +78,7 @@ class URController:
         self.protective_stop_at: float | None = None
         self.estop = False
         self.in_int = [0] * REGISTERS
+        self.register_writes = 0  # integer input register values received (a script's commands)
         self.in_double = [0.0] * REGISTERS
         self.out_int = [0] * REGISTERS
         self.out_double = [0.0] * REGISTERS
@@ -94,10 +96,10 @@ class URController:
         self._pose_cache: dict[bytes, tuple[float, ...]] = {}
 
     # ------------------------------------------------------------------ log
-    def note(self, text: str) -> None:
+    def note(self, text: str, level: int = logging.INFO) -> None:
         self.events.append(Event(self.timestamp_s, text))
         del self.events[:-200]
-        log.info("sim UR %s: %s", self.spec.name, text)
+        log.log(level, "sim UR %s at %.3f s: %s", self.spec.name, self.timestamp_s, text)
 
     # ------------------------------------------------------------------ power (dashboard)
     def power_on(self) -> None:
@@ -136,7 +138,7 @@ class URController:
         self._halt()
         self.safety_mode = SafetyMode.PROTECTIVE_STOP
         self.protective_stop_at = self.timestamp_s
-        self.note(f"Protective stop: {reason}")
+        self.note(f"Protective stop: {reason}", logging.WARNING)
         self.stop_program("protective stop")
 
     def unlock_protective_stop(self) -> str | None:
@@ -203,6 +205,7 @@ class URController:
         for name, v in values.items():
             if name.startswith("input_int_register_"):
                 self.in_int[int(name.rsplit("_", 1)[1])] = int(v)
+                self.register_writes += 1
             elif name.startswith("input_double_register_"):
                 self.in_double[int(name.rsplit("_", 1)[1])] = float(v)
         for mask_name, value_name, attr in (
@@ -248,9 +251,14 @@ class URController:
         r = self.arm.ref
         st = self.engine.step(dt, r.q, r.qd, r.qdd)
         self.q, self.qd = st.q, st.qd
+        self.tcp_force = st.tcp_force  # a twin's wrist wrench (what a guarded touch-down watches)
         self.digital_inputs = st.digital_inputs
-        # the engines' convention (the Dobot's): cabinet outputs from bit 0, the flange's from bit 32
-        self.engine.set_digital_outputs(
+        self.engine.set_digital_outputs(self.engine_digital_outputs)
+
+    @property
+    def engine_digital_outputs(self) -> int:
+        """The outputs in the engines' convention (the Dobot's): cabinet from bit 0, the flange's from 32."""
+        return (
             self.standard_do | (self.configurable_do << 8) | ((self.tool_do & 0b11) << ENGINE_TOOL_DO_SHIFT)
         )
 
@@ -277,7 +285,7 @@ class URController:
             "joint_control_output": z6,
             "actual_TCP_pose": self._tcp_pose(self.q),
             "actual_TCP_speed": z6,
-            "actual_TCP_force": z6,
+            "actual_TCP_force": tuple(float(v) for v in self.tcp_force),
             "target_TCP_pose": self._tcp_pose(self.arm.ref.q),
             "target_TCP_speed": z6,
             "actual_digital_input_bits": self.digital_inputs,

@@ -10,6 +10,10 @@ through ``output_int_register_0`` (1 ready for a command, 2 done with it) and ``
 - any other command, unless already executing it: process it (a synchronous move blocks the loop
   until the arm stops), signal done, remember it is executing (ur_rtde then clears the command).
 
+A command the registers still hold from before this run of the script started (a servoJ streamed
+into a protective stop, say) is not taken up: the script acts on what its client writes while it
+runs (a sim choice; replaying a stale servo target after an unlock would jump the arm).
+
 Register numbers carry the offset ur_rtde injected (0, or 24 for the upper range). Commands the sim
 does not model stop the program with a message, so the client's call fails instead of pretending.
 docs/ur/rtde.md §4 lists each command's registers.
@@ -42,6 +46,7 @@ class ControlScript:
         self._async_running = False
         self._wr_count = 0
         self._op_id = 0
+        self._writes_at_start = controller.register_writes
         self._write_async(-1)  # reset_async_progress()
         self._signal(ScriptState.READY_FOR_CMD)
 
@@ -87,7 +92,7 @@ class ControlScript:
             self._signal(ScriptState.DONE_WITH_CMD)
             self.executing = True
             return
-        cmd = self._int(0)
+        cmd = self._int(0) if self.c.register_writes != self._writes_at_start else int(C.NO_CMD)
         if cmd in REALTIME_COMMANDS:
             self._process(cmd)
             self._signal(ScriptState.READY_FOR_CMD)

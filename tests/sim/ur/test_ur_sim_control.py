@@ -67,7 +67,8 @@ def arm(ur_sim: URSimProcess) -> Iterator[Arm]:
 def test_control_interface_connects_and_its_script_runs(arm: Arm) -> None:
     assert arm.c.isConnected()
     assert arm.c.isProgramRunning()
-    assert arm.r.getRuntimeState() == RuntimeState.PLAYING
+    # the receive interface's newest package may predate the control interface's (a loaded machine)
+    arm.wait(lambda: arm.r.getRuntimeState() == RuntimeState.PLAYING, 0.5)
     assert "program 'rtde_control' started" in arm.sim.events()
 
 

@@ -13,8 +13,9 @@ import rtde_control
 import rtde_io
 import rtde_receive
 
+from services.common.sensors import CameraIntrinsics
 from services.rtde.codes import URRobotMode
-from services.sim.ur.process import SimSpec, URSimProcess
+from services.sim.ur.process import PipeCamera, PipeTruth, SimRequest, SimSpec, URSimProcess
 from services.sim.ur.server import free_loopback_host
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
@@ -60,3 +61,23 @@ def test_ur_rtde_moves_the_twin_arm_and_closes_its_gripper(twin_sim: URSimProces
         io.disconnect()
         r.disconnect()
         db.disconnect()
+
+
+def test_the_pipe_carries_the_twins_camera_scene_reset_and_ground_truth(twin_sim: URSimProcess) -> None:
+    camera = PipeCamera(twin_sim)
+    frame = camera.capture()
+    assert frame.color.shape == (camera.intrinsics.height, camera.intrinsics.width, 3)
+    assert frame.depth.shape == frame.color.shape[:2] and int(frame.depth.max()) > 0  # the table seen
+    truth = PipeTruth(twin_sim)
+    assert truth.scene_record().seed == 3
+    assert not truth.rod_standing().success  # the rod lies on the table as laid out
+    twin_sim.reset_scene(4)
+    assert truth.scene_record().seed == 4
+    assert frame.seq >= 1 and camera.capture().seq == 1  # the new scene's own camera renders it
+
+
+def test_a_late_answer_is_never_taken_for_the_next_request(twin_sim: URSimProcess) -> None:
+    with pytest.raises(TimeoutError):
+        twin_sim.request(SimRequest.CAPTURE, timeout_s=0.0)  # a render takes longer than no time
+    # the frame that comes late is dropped: the next request on that pipe gets its own answer
+    assert isinstance(twin_sim.intrinsics(), CameraIntrinsics)
