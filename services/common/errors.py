@@ -86,6 +86,11 @@ class RobotBusyError(ExecutionError):
     grpc_code = grpc.StatusCode.FAILED_PRECONDITION
 
 
+class CycleInterruptedError(ExecutionError):
+    """A pick cycle cut short by a crashed process or the operator's stop, not by a failure of its
+    own; the pick's record is marked interrupted at the stage it had reached."""
+
+
 class ControllerError(ExecutionError):
     """The robot controller refused a command or raised an alarm."""
 

@@ -90,81 +90,89 @@ def track_paths(
     Cost = max-norm move from the seed to the first sample + Σ per-step max-norm joint change
     (a proxy for motion time at equal joint speeds). ``sample_names`` (length N) name the
     samples in failure reasons.
+
+    Only live tracks are carried from sample to sample (most die within a few samples: a branch
+    outside the limits, an elbow on the wrong side), so the work shrinks with them.
     """
     T = np.asarray(T_base_flange, dtype=float)
     B, N = T.shape[:2]
     q_all, valid = ik_all(spec, T)  # (B, N, 8, 6), (B, N, 8)
-    seed = np.broadcast_to(np.asarray(seed, dtype=float), (B, spec.dof))[:, None, :]
+    seed = np.broadcast_to(np.asarray(seed, dtype=float), (B, spec.dof))
     names = sample_names or [f"sample {k}" for k in range(N)]
 
     # start tracks: every solution of sample 0, moved to the turn nearest the seed
-    q0 = _nearest_turn(spec, q_all[:, 0], seed)  # (B, 8, 6)
-    alive = valid[:, 0] & spec.within_limits(q0)  # (B, 8)
+    q0 = _nearest_turn(spec, q_all[:, 0], seed[:, None, :])  # (B, 8, 6)
+    alive0 = valid[:, 0] & spec.within_limits(q0)  # (B, 8)
     reason = ["" for _ in range(B)]
     fail_at = np.full(B, -1)
     for b in range(B):
         if not valid[b, 0].any():
             reason[b] = f"no IK solution at {names[0]}"
             fail_at[b] = 0
-        elif not alive[b].any():
+        elif not alive0[b].any():
             reason[b] = f"no IK solution within joint limits at {names[0]}"
             fail_at[b] = 0
-    cost = np.where(alive, np.max(np.abs(q0 - seed), axis=-1), BIG)
-    path = np.empty((B, 8, N, 6))
-    path[:, :, 0] = q0
-    min_margin = singularity_margin(spec, q0)
-    prev = q0
+    # the live tracks, flat (ix: index into the started tracks)
+    bi, ti = np.nonzero(alive0)  # path b, track t: in (b, t) order
+    started = bi.size
+    ix = np.arange(started)
+    prev = q0[bi, ti]  # (M, 6)
+    cost = np.max(np.abs(prev - seed[bi]), axis=-1)
+    margin = singularity_margin(spec, prev)
+    path = np.empty((started, N, spec.dof))
+    path[:, 0] = prev
     for k in range(1, N):
-        cand = _nearest_turn(spec, q_all[:, k, None, :, :], prev[:, :, None, :])  # (B, 8tr, 8sol, 6)
-        ok_sol = valid[:, k, None, :] & spec.within_limits(cand)
-        step = np.max(np.abs(cand - prev[:, :, None, :]), axis=-1)
-        step = np.where(ok_sol, step, BIG)
-        pick = np.argmin(step, axis=-1)  # (B, 8)
-        best_step = np.take_along_axis(step, pick[..., None], axis=-1)[..., 0]
-        nxt = np.take_along_axis(cand, pick[..., None, None], axis=2)[:, :, 0]
-        was_alive = alive
-        alive = alive & (best_step <= limits.jump_threshold_rad)
-        died = was_alive.any(axis=1) & ~alive.any(axis=1)
-        for b in np.nonzero(died)[0].tolist():
-            fail_at[b] = k
-            if not valid[b, k].any():
-                reason[b] = f"no IK solution at {names[k]}"
-            elif not (valid[b, k] & spec.within_limits(q_all[b, k])).any() and not ok_sol[b].any():
-                reason[b] = f"no IK solution within joint limits at {names[k]}"
-            else:
-                reason[b] = (
-                    f"the joints would jump (branch change or singularity) at {names[k]}, "
-                    f"{np.degrees(np.min(best_step[b])):.0f}° in one step"
-                )
-        cost = np.where(alive, cost + best_step, BIG)
-        path[:, :, k] = nxt
-        min_margin = np.minimum(min_margin, singularity_margin(spec, nxt))
-        prev = nxt
+        if bi.size == 0:
+            break
+        cand = _nearest_turn(spec, q_all[bi, k], prev[:, None, :])  # (M, 8sol, 6)
+        ok_sol = valid[bi, k] & spec.within_limits(cand)
+        step = np.where(ok_sol, np.max(np.abs(cand - prev[:, None, :]), axis=-1), BIG)
+        pick = np.argmin(step, axis=-1)
+        rows = np.arange(bi.size)
+        best_step = step[rows, pick]
+        nxt = cand[rows, pick]
+        keep = best_step <= limits.jump_threshold_rad
+        if not keep.all():
+            for b in np.setdiff1d(bi, bi[keep]).tolist():  # every track of path b died here
+                fail_at[b] = k
+                if not valid[b, k].any():
+                    reason[b] = f"no IK solution at {names[k]}"
+                elif not (valid[b, k] & spec.within_limits(q_all[b, k])).any() and not ok_sol[bi == b].any():
+                    reason[b] = f"no IK solution within joint limits at {names[k]}"
+                else:
+                    reason[b] = (
+                        f"the joints would jump (branch change or singularity) at {names[k]}, "
+                        f"{np.degrees(np.min(best_step[bi == b])):.0f}° in one step"
+                    )
+        path[ix, k] = nxt
+        margin = np.minimum(margin, singularity_margin(spec, nxt))
+        cost = cost + best_step
+        bi, ix, prev, cost, margin = bi[keep], ix[keep], nxt[keep], cost[keep], margin[keep]
 
     # table clearance of the elbow and wrist joints (frames 3..6) along each surviving track (only
     # those: forward kinematics of every dead track was most of the planning time)
-    low = np.full((B, 8), np.inf)
-    live = np.nonzero(alive)
-    if live[0].size:
-        low[live] = frame_origins(spec, path[live])[..., 2:, 2].min(axis=(-1, -2))  # (M, N, 4) → (M,)
+    low = frame_origins(spec, path[ix])[..., 2:, 2].min(axis=(-1, -2)) if ix.size else np.empty(0)
     near_table = low < limits.table_z_m + limits.arm_table_clearance_m
-    singular = min_margin < limits.min_singularity_sin
-    for b in range(B):
-        if alive[b].any() and not (alive[b] & ~near_table[b] & ~singular[b]).any():
+    singular = margin < limits.min_singularity_sin
+    good = ~near_table & ~singular
+    ok = np.zeros(B, dtype=bool)
+    q_best = np.zeros((B, N, spec.dof))
+    best_cost = np.full(B, BIG)
+    for b in np.unique(bi).tolist():
+        mine = np.nonzero(bi == b)[0]
+        usable = mine[good[mine]]
+        if usable.size == 0:
             fail_at[b] = N - 1
-            if near_table[b][alive[b]].all():
+            if near_table[mine].all():
                 reason[b] = (
                     f"every IK branch brings the elbow or wrist within {limits.arm_table_clearance_m:.2f} m "
-                    f"of the table (lowest {np.max(np.where(alive[b], low[b], -BIG)):.3f} m)"
+                    f"of the table (lowest {np.max(low[mine]):.3f} m)"
                 )
             else:
                 reason[b] = "every IK branch passes near a wrist or elbow singularity"
-    alive &= ~near_table & ~singular
-    cost = np.where(alive, cost, BIG)
-    best = np.argmin(cost, axis=1)
-    ok = alive[np.arange(B), best]
-    q_best = path[np.arange(B), best]
-    for b in np.nonzero(ok)[0].tolist():
+            continue
+        j = usable[np.argmin(cost[usable])]  # the first of equal costs in track order, as argmin
+        ok[b], q_best[b], best_cost[b] = True, path[ix[j]], cost[j]
         reason[b] = ""
         fail_at[b] = -1
-    return TrackResult(ok, q_best, cost[np.arange(B), best], reason, fail_at)
+    return TrackResult(ok, q_best, best_cost, reason, fail_at)

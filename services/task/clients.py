@@ -64,6 +64,16 @@ def boxes_msg(obstacles: tuple[SeenBox, ...]) -> list[motion_pb2.CollisionBox]:
     ]
 
 
+# A service that died and came back is reached again within about a second: gRPC's own reconnect
+# backoff grows to 120 s, and a cycle's first calls after a restart would fail on a channel still
+# waiting out its backoff.
+RECONNECT = [
+    ("grpc.initial_reconnect_backoff_ms", 200),
+    ("grpc.min_reconnect_backoff_ms", 200),
+    ("grpc.max_reconnect_backoff_ms", 1000),
+]
+
+
 class CellClients:
     """gRPC channels to the other services, opened once and reused."""
 
@@ -71,7 +81,7 @@ class CellClients:
         g = settings.grpc
         self.settings = settings
         self._channels = {
-            name: channel(g.client_host(name), port, cell_token(settings))  # type: ignore[arg-type]
+            name: channel(g.client_host(name), port, cell_token(settings), RECONNECT)  # type: ignore[arg-type]
             for name, port in (
                 ("vision", g.vision_port),
                 ("grasp", g.grasp_port),

@@ -33,6 +33,7 @@ from services.common.errors import (
     PlanningError,
     RobotError,
     SafetyError,
+    VisionError,
 )
 from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.kinematics.trajectory import JointTrajectory
@@ -130,6 +131,11 @@ class Orchestrator:
         self._view = view
 
     # ------------------------------------------------------------------ bookkeeping
+    @property
+    def current(self) -> PickOutcome | None:
+        """The outcome of the cycle in progress as it stands (None between cycles)."""
+        return self._outcome
+
     def _enter(self, state: CycleState, message: str = "") -> None:
         self._close_stage()
         out = self._outcome
@@ -157,13 +163,16 @@ class Orchestrator:
         out.stage_wall_s[key] = out.stage_wall_s.get(key, 0.0) + (self._wall_clock() - t0[1])
         self._stage_t0 = None
 
-    async def _timed(self, aw: Awaitable[T], seconds: float, what: str) -> T:
-        """Compute (detection, planning) under a wall-clock deadline: it runs on this machine's time."""
+    async def _timed(
+        self, aw: Awaitable[T], seconds: float, what: str, error: type[RobotError] = RobotError
+    ) -> T:
+        """Compute (detection, planning) under a wall-clock deadline: it runs on this machine's time;
+        past it, ``error`` (a detection that ran late is a VisionError: looked at again, not given up)."""
         try:
             async with asyncio.timeout(seconds):
                 return await aw
         except TimeoutError:
-            raise RobotError(f"{what} did not finish within its {seconds:.0f} s deadline") from None
+            raise error(f"{what} did not finish within its {seconds:.0f} s deadline") from None
 
     async def _arm(self, aw: Awaitable[T], seconds: float, what: str) -> T:
         """What the arm or the gripper does, under a deadline on the controller's clock."""
@@ -180,8 +189,7 @@ class Orchestrator:
         attempts = Attempts()
         self._enter(CycleState.INIT)
         try:
-            await self._arm(self.robot.recover(), self.config.deadlines.motion_s, "robot preparation")
-            await self._go_home()
+            await self._prepare(out)
             await self._cycle(task, out, attempts)
             out.success = True
             self._enter(CycleState.DONE, "object placed")
@@ -202,6 +210,19 @@ class Orchestrator:
             self._outcome = None
             self.robot = robot
         return out
+
+    async def _prepare(self, out: PickOutcome) -> None:
+        """Recover the arm and take it home. A fault on the way (the execution monitor stopped the arm,
+        say) fails this cycle and the next one tries again, as an aborted step does later in the cycle;
+        a safety stop still waits for the operator."""
+        try:
+            await self._arm(self.robot.recover(), self.config.deadlines.motion_s, "robot preparation")
+            await self._go_home()
+        except SafetyError:
+            raise
+        except RobotError as exc:
+            out.error_code = type(exc).__name__
+            raise CycleAborted(f"{self.state.value}: {exc}") from exc
 
     async def _cycle(self, task: TaskKind, out: PickOutcome, attempts: Attempts) -> None:
         while True:  # each pass: detect → plan → execute; recovery loops back here
@@ -233,7 +254,8 @@ class Orchestrator:
             except SafetyError:
                 raise
             except RobotError as exc:
-                action = decide(exc, attempts, self.config.limits)
+                holding = planned.plan.waypoints[self._progress.index].holding  # the object is carried
+                action = decide(exc, attempts, self.config.limits, holding=holding)
                 out.error_code = type(exc).__name__
                 log.warning("execution failed in %s: %s → %s", self.state.value, exc, action.value)
                 if action is Action.WAIT_FOR_OPERATOR:
@@ -257,7 +279,9 @@ class Orchestrator:
         while True:
             self._enter(CycleState.DETECT)
             try:
-                obs = await self._timed(self.vision.observe(), self.config.deadlines.detect_s, "detection")
+                obs = await self._timed(
+                    self.vision.observe(), self.config.deadlines.detect_s, "detection", VisionError
+                )
                 if out.task is TaskKind.STAND_ROD and not obs.rods:
                     raise ObjectNotDetectedError(
                         "no rod detected: " + ("; ".join(obs.notes) or "empty table")
@@ -291,6 +315,7 @@ class Orchestrator:
                     self._plan_once(task, obs, out, attempts.grasp_variants),
                     self.config.deadlines.plan_s,
                     "planning",
+                    PlanningError,  # the next option, or an abort naming it: never an escaped error
                 )
             except PlanningError as exc:
                 action = decide(exc, attempts, self.config.limits)

@@ -16,7 +16,12 @@ def _pose(values: list[float] | None) -> common_pb2.Pose | None:
     return common_pb2.Pose(x=x, y=y, z=z, qx=qx, qy=qy, qz=qz, qw=qw)
 
 
-def pick_event_msg(o: PickOutcome, robot_id: str) -> task_pb2.PickEvent:
+def pick_event_msg(
+    o: PickOutcome, robot_id: str, status: task_pb2.PickStatus | None = None
+) -> task_pb2.PickEvent:
+    """The pick's record; ``status`` defaults to the outcome (succeeded or failed)."""
+    if status is None:
+        status = task_pb2.PICK_STATUS_SUCCEEDED if o.success else task_pb2.PICK_STATUS_FAILED
     msg = task_pb2.PickEvent(
         header=common_pb2.Header(stamp_ns=time.time_ns(), frame_id="base"),
         pick_id=o.pick_id,
@@ -31,6 +36,7 @@ def pick_event_msg(o: PickOutcome, robot_id: str) -> task_pb2.PickEvent:
         error_code=o.error_code,
         attempts=o.attempts,
         task=o.task,
+        status=status,
     )
     for key, value in o.stage_durations_s.items():
         msg.stage_durations_s[key] = value

@@ -66,13 +66,21 @@ def _budget(limits: RetryLimits, counter: str) -> int:
     return getattr(limits, counter) - (1 if counter == "grasp_variants" else 0)
 
 
-def decide(error: BaseException, attempts: Attempts, limits: RetryLimits) -> Action:
-    """The next action after ``error``; also counts the attempt it spends."""
+def decide(error: BaseException, attempts: Attempts, limits: RetryLimits, *, holding: bool = False) -> Action:
+    """The next action after ``error``; also counts the attempt it spends.
+
+    ``holding``: the failed step carries the object (the gripper closed on it). A plan that cannot be
+    made from there is not traded for another grasp, which backs off with the jaws open and would drop
+    the object wherever the arm stands, then look for it on the table: the cycle gives up with the arm
+    stopped and the object still held (an alarm is still cleared and the carry resumed).
+    """
     attempts.history.append(f"{type(error).__name__}: {error}")
     if isinstance(error, SafetyError):
         return Action.WAIT_FOR_OPERATOR
     for kinds, counter, action in _RULES:
         if isinstance(error, kinds):
+            if holding and action is Action.NEXT_GRASP:
+                return Action.ABORT
             used = getattr(attempts, counter)
             if used < _budget(limits, counter):
                 setattr(attempts, counter, used + 1)

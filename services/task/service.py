@@ -1,8 +1,11 @@
 """The task service: TaskController over gRPC, TaskStatus and PickEvents on Zenoh.
 
 A thin shell around :class:`Orchestrator`: it runs cycles on request, publishes
-status on every state change (and at ``task.status_rate_hz``), publishes one
-PickEvent per pick, and turns stop / e-stop into immediate robot commands. Cycle and
+status on every state change (and at ``task.status_rate_hz``), publishes each pick's
+record (a PickEvent when its cycle starts and at each stage it reaches, kept in a
+:class:`CycleJournal` on disk, and one with its outcome; a cycle a crash cut is published
+as interrupted when the service comes back), and turns stop / e-stop into immediate
+robot commands. Cycle and
 stage times are on the controller's clock: the composition root may pass it in (the
 in-process cell reads the driver's feedback); otherwise the service follows the
 TimeStamp of the robot's joint states on the bus.
@@ -14,7 +17,8 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import AsyncIterator, Callable, Coroutine, Iterator
+from collections.abc import AsyncIterator, Callable, Coroutine, Iterator, Sequence
+from pathlib import Path
 from typing import Any, Protocol
 
 import grpc
@@ -25,13 +29,18 @@ from services.common.bus import Bus
 from services.common.errors import InvalidInputError, SafetyError
 from services.common.keys import CellKeys
 from services.common.modes import TaskKind
-from services.common.settings import Settings
+from services.common.settings import REPO_ROOT, Settings
 from services.common.shell import GrpcShell, ShellStateError, cell_token
+from services.kinematics.analytic import fk
 from services.kinematics.model import load_arm
-from services.kinematics.tool import tool_geometry
-from services.task.clients import CellClients
+from services.kinematics.robot_models import get_robot
+from services.kinematics.tool import tool_frame, tool_geometry
+from services.kinematics.trajectory import JointTrajectory
+from services.task.clients import CellClients, boxes_msg
 from services.task.cycle import CycleConfig, Orchestrator
+from services.task.journal import CycleJournal, interrupted
 from services.task.messages import pick_event_msg
+from services.task.ports import MotionPort, Move, SeenBox
 from services.task.recovery import RetryLimits
 from services.task.states import CycleState, PickOutcome, StateDeadlines, TaskCounters
 from services.task.view import CameraModel, ViewCheck
@@ -39,6 +48,16 @@ from services.task.view import CameraModel, ViewCheck
 log = logging.getLogger("pickplace.task.service")
 
 TASKS = tuple(TaskKind)
+# states after which the cycle's outcome follows at once: no running record for them
+_ENDING = (CycleState.DONE, CycleState.ABORT, CycleState.ESTOP)
+# an interrupted cycle found at start goes out again with this many status ticks (a gateway that was
+# not listening yet hears it; the database keeps a pick's first outcome, so repeats change nothing)
+REPUBLISH_TICKS = 10
+
+
+def journal_path(settings: Settings) -> Path:
+    """The task's record of the cycle in progress, in the cell's state directory."""
+    return settings.state.path(settings.cell_id, REPO_ROOT) / "task" / "cycle.pb"
 
 
 class ControllerClock:
@@ -118,6 +137,54 @@ def view_check(settings: Settings) -> ViewCheck | None:
     )
 
 
+class PublishedPlans:
+    """The motion port of the cycle, publishing every plan it hands out (``TaskPlan`` on ``keys.task_plans``:
+    the tool tip's path and the boxes planned around) for the live view and the recorder. A plan that
+    cannot be published is logged; the cycle goes on with it."""
+
+    def __init__(self, motion: MotionPort, settings: Settings, publish: Callable[[task_pb2.TaskPlan], None]):
+        self.motion = motion
+        self.publish = publish
+        self.cycle_index = 0  # set by the runner at each cycle
+        self._spec = get_robot(settings.robot.model)
+        self._T_flange_tool = tool_frame(settings)
+        self._seq = 0
+
+    async def tool_pose(self, q: np.ndarray) -> np.ndarray:
+        return await self.motion.tool_pose(q)
+
+    async def plan_moves(
+        self, start: np.ndarray, moves: Sequence[Move], obstacles: tuple[SeenBox, ...]
+    ) -> list[JointTrajectory | None]:
+        planned = await self.motion.plan_moves(start, moves, obstacles)
+        try:
+            self.publish(self.message(planned, moves, obstacles))
+        except Exception:  # the view of a plan must never fail the cycle: logged, the plan goes on
+            log.warning("publishing a plan failed", exc_info=True)
+        return planned
+
+    def message(
+        self, planned: Sequence[JointTrajectory | None], moves: Sequence[Move], obstacles: tuple[SeenBox, ...]
+    ) -> task_pb2.TaskPlan:
+        self._seq += 1
+        boxes: dict[tuple[float, ...], SeenBox] = {}  # the plan's boxes and each move's own, once each
+        for b in (*obstacles, *(b for m in moves for b in m.obstacles)):
+            boxes.setdefault((*np.ravel(b.min), *np.ravel(b.max)), b)
+        knots = [t.positions for t in planned if t is not None]
+        xyz = (
+            fk(self._spec, np.concatenate(knots), self._T_flange_tool)[:, :3, 3]
+            if knots
+            else np.zeros((0, 3))
+        )
+        return task_pb2.TaskPlan(
+            header=common_pb2.Header(stamp_ns=time.time_ns(), frame_id="base", seq=self._seq),
+            cycle_index=self.cycle_index,
+            label="+".join(m.label for m in moves if m.label),
+            tool_path=[common_pb2.Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in xyz],
+            boxes=boxes_msg(tuple(boxes.values())),
+        )
+
+
 class TaskRunner:
     """Runs cycles, tracks counters and status, and reports every outcome."""
 
@@ -129,6 +196,7 @@ class TaskRunner:
         between_cycles: Callable[[], object] | None = None,
         spawn: Spawn | None = None,
         clock: Callable[[], float] = time.perf_counter,
+        journal: CycleJournal | None = None,
     ):
         self.settings = settings
         self.clients = clients
@@ -147,10 +215,22 @@ class TaskRunner:
         self._spawn = spawn  # the task service's task group runs the cycle loop
         self._loop_task: asyncio.Task[None] | None = None
         self._seq = 0
+        self.journal = journal or CycleJournal(None)
+        self._recording: PickOutcome | None = None  # the cycle whose record this runner keeps
+        self._recorded_stage = ""
+        # interrupted cycles found at start: published then, with the next status ticks, and again
+        # before the next cycle starts
+        self.pending_records: list[task_pb2.PickEvent] = []
+        self._republish = 0
+        self.plans = (  # every plan out on the bus too, for the live view and the recorder
+            PublishedPlans(clients.motion, settings, lambda m: bus.publish(self.keys.task_plans, m))
+            if bus is not None
+            else None
+        )
         self.orchestrator = Orchestrator(
             clients.vision,
             clients.grasp,
-            clients.motion,
+            self.plans or clients.motion,
             clients.robot,
             cycle_config(settings),
             on_state=self._on_state,
@@ -196,7 +276,75 @@ class TaskRunner:
     def _on_state(self, state: CycleState, message: str) -> None:
         self.state = state
         self.message = message
+        self._record_progress(state)
         self.publish_status()
+
+    # ------------------------------------------------------------------ pick records
+    def publish_record(self, event: task_pb2.PickEvent) -> None:
+        """A running record on ``pick_progress``, an outcome (once per pick, but for a repeated
+        interrupted one) on ``pick_events``."""
+        if self.bus is None:
+            return
+        running = event.status == task_pb2.PICK_STATUS_RUNNING
+        try:
+            self.bus.publish(self.keys.pick_progress if running else self.keys.pick_events, event)
+        except Exception as exc:
+            log.warning("publishing pick event failed: %s", exc)
+
+    def recover_records(self) -> task_pb2.PickEvent | None:
+        """At start: a cycle the last task process left unfinished is published as interrupted."""
+        event = self.journal.leftover()
+        if event is None:
+            return None
+        log.warning(
+            "cycle %s was cut at %s when the last task process ended: recorded as interrupted",
+            event.pick_id,
+            event.stage_reached,
+        )
+        self.pending_records.append(event)
+        self.publish_record(event)
+        self._republish = REPUBLISH_TICKS
+        return event
+
+    def republish_pending(self) -> None:
+        """With a status tick: the interrupted cycles found at start, once more (a bounded number of times)."""
+        if self._republish <= 0:
+            return
+        self._republish -= 1
+        for event in self.pending_records:
+            self.publish_record(event)
+
+    def _record_progress(self, state: CycleState) -> None:
+        """The cycle's running record: when it starts and at each stage it reaches (on disk and out)."""
+        current = self.orchestrator.current
+        if current is None:
+            return
+        if current is not self._recording:  # a new cycle starts
+            self._recording, self._recorded_stage = current, ""
+            pending, self.pending_records = self.pending_records, []
+            for event in pending:  # before this cycle's row, in case nobody heard them at start
+                self.publish_record(event)
+        if state in _ENDING or current.stage_reached == self._recorded_stage:
+            return
+        self._recorded_stage = current.stage_reached
+        event = pick_event_msg(current, self.settings.cell_id, task_pb2.PICK_STATUS_RUNNING)
+        self.journal.write(event)
+        self.publish_record(event)
+
+    def _record_cut(self, exc: BaseException) -> None:
+        """The cycle ended without an outcome of its own (a safety stop, a lost service, the operator's
+        stop, a bug): its record says so."""
+        out, self._recording = self._recording, None
+        if out is None:
+            return
+        event = pick_event_msg(out, self.settings.cell_id)
+        if isinstance(exc, asyncio.CancelledError):
+            event = interrupted(event, "stopped (the operator's stop or a shutdown)")
+        elif not out.failure_reason:
+            event.failure_reason = f"{out.stage_reached}: {type(exc).__name__}: {exc}"
+            event.error_code = type(exc).__name__
+        self.publish_record(event)
+        self.journal.clear()
 
     @contextlib.contextmanager
     def status_subscription(self) -> Iterator[asyncio.Queue[task_pb2.TaskStatus]]:
@@ -214,7 +362,14 @@ class TaskRunner:
             raise InvalidInputError(f"unknown task {task!r}; choose one of {[str(t) for t in TASKS]}")
         self.task = TaskKind(task)
         self.cycle_index += 1
-        outcome = await self.orchestrator.run(task)
+        if self.plans is not None:
+            self.plans.cycle_index = self.cycle_index
+        self._recording = None
+        try:
+            outcome = await self.orchestrator.run(task)
+        except BaseException as exc:
+            self._record_cut(exc)
+            raise
         self._report(outcome)
         return outcome
 
@@ -223,11 +378,9 @@ class TaskRunner:
         self.outcomes.append(outcome)
         if not outcome.success:
             self.last_error = outcome.failure_reason
-        if self.bus is not None:
-            try:
-                self.bus.publish(self.keys.pick_events, pick_event_msg(outcome, self.settings.cell_id))
-            except Exception as exc:
-                log.warning("publishing pick event failed: %s", exc)
+        self._recording = None
+        self.publish_record(pick_event_msg(outcome, self.settings.cell_id))
+        self.journal.clear()
         for cb in list(self.listeners):
             cb(outcome)
         self.publish_status()
@@ -380,7 +533,14 @@ class TaskService(GrpcShell):
         # the controller's clock: given by the composition root, else followed on the bus
         self.controller_clock = ControllerClock() if clock is None and bus is not None else None
         task_clock = clock or self.controller_clock or time.perf_counter
-        self.runner = TaskRunner(settings, self.clients, bus, spawn=self.spawn, clock=task_clock)
+        self.runner = TaskRunner(
+            settings,
+            self.clients,
+            bus,
+            spawn=self.spawn,
+            clock=task_clock,
+            journal=CycleJournal(journal_path(settings)),
+        )
 
     async def _start(self, stack: contextlib.AsyncExitStack) -> None:
         stack.push_async_callback(self.clients.close)
@@ -389,6 +549,7 @@ class TaskService(GrpcShell):
                 CellKeys(self.settings.cell_id).joint_states, self.controller_clock.on_joint_state
             )
             stack.callback(sub.undeclare)
+        self.runner.recover_records()
         await self._serve_grpc(
             stack,
             lambda server: task_pb2_grpc.add_TaskControllerServicer_to_server(
@@ -403,6 +564,7 @@ class TaskService(GrpcShell):
         while True:
             await asyncio.sleep(period)
             self.runner.publish_status()
+            self.runner.republish_pending()
 
 
 async def serve(settings: Settings, between_cycles: Callable[[Bus], object] | None = None) -> None:

@@ -3,6 +3,10 @@ carrying each recovery out over scripted fakes (states it went through, commands
 
 from __future__ import annotations
 
+import asyncio
+from dataclasses import replace
+from typing import Any
+
 import numpy as np
 import pytest
 
@@ -19,8 +23,9 @@ from services.common.errors import (
     VisionError,
 )
 from services.common.modes import GripperCommand
+from services.task.ports import GraspPlan, Observation
 from services.task.recovery import Action, Attempts, RetryLimits, decide
-from services.task.states import CycleState
+from services.task.states import CycleState, StateDeadlines
 from tests.task.fakes import (
     HELD_ROD,
     HOME,
@@ -30,6 +35,7 @@ from tests.task.fakes import (
     FakeRobot,
     FakeVision,
     Fault,
+    GraspCall,
     rod_at,
     seen,
 )
@@ -95,6 +101,53 @@ async def test_a_camera_hiccup_is_retried_and_the_cycle_goes_on() -> None:
         CycleState.PLAN,
     ]
     assert cell.wait.waits == [0.5]
+
+
+class HangingOnceVision(FakeVision):
+    """Its first observe() never answers (a detection starved of CPU on a loaded machine)."""
+
+    async def observe(self) -> Observation:
+        if self.calls == 0:
+            self.calls += 1
+            await asyncio.Event().wait()
+        return await super().observe()
+
+
+async def test_a_detection_past_its_deadline_is_looked_at_again_not_given_up() -> None:
+    config = replace(FakeCell(FakeVision(seen())).config, deadlines=StateDeadlines(detect_s=0.05))
+    cell = FakeCell(HangingOnceVision(seen(rod_at(0.5, 0.1))), config=config)
+    outcome = await cell.run()
+    assert outcome.success and outcome.attempts == 1
+    assert cell.states[:6] == [
+        CycleState.INIT,
+        CycleState.DETECT,
+        CycleState.DETECT_FAILED,
+        CycleState.RETRY,
+        CycleState.DETECT,
+        CycleState.PLAN,
+    ]
+    assert "detection did not finish" in cell.messages[cell.states.index(CycleState.DETECT_FAILED)]
+    assert cell.vision.calls == 2
+
+
+class HangingOnceGrasp(FakeGrasp):
+    """Its first plan never answers (a planner starved of CPU on a loaded machine)."""
+
+    async def plan_rod(self, *args: Any, **kw: Any) -> GraspPlan:
+        if not self.calls:
+            self.calls.append(GraspCall("rod", -1, None, ()))
+            await asyncio.Event().wait()
+        return await super().plan_rod(*args, **kw)
+
+
+async def test_a_plan_past_its_deadline_is_a_planning_failure_and_the_next_option_is_tried() -> None:
+    config = replace(FakeCell(FakeVision(seen())).config, deadlines=StateDeadlines(plan_s=0.05))
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))), grasp=HangingOnceGrasp(), config=config)
+    outcome = await cell.run()
+    assert outcome.success and outcome.attempts == 2
+    assert outcome.error_code == "PlanningError"  # what the first option ran into
+    assert cell.states[:4] == [CycleState.INIT, CycleState.DETECT, CycleState.PLAN, CycleState.PLAN]
+    assert len(cell.grasp.calls) == 2
 
 
 async def test_a_failed_plan_tries_the_next_grasp_option() -> None:
@@ -178,6 +231,32 @@ async def test_an_alarm_while_carrying_the_rod_resumes_with_the_rod_in_the_gripp
     assert ("gripper", OPEN) not in after_fault[:4] and cell.vision.calls == 1
     resume = cell.motion.labelled(["REORIENT"])
     assert resume.moves[0].held is HELD_ROD
+    assert CycleState.DETECT not in cell.states[cell.states.index(CycleState.REORIENT) :]
+
+
+def test_a_plan_that_fails_while_carrying_is_never_traded_for_another_grasp() -> None:
+    attempts = Attempts()
+    assert decide(CollisionError("start in collision"), attempts, LIMITS, holding=True) is Action.ABORT
+    assert attempts.grasp_variants == 0
+    assert decide(ControllerError("alarm 117"), attempts, LIMITS, holding=True) is Action.CLEAR_AND_RESUME
+    assert decide(GraspFailureError("not in the gripper"), attempts, LIMITS, holding=True) is Action.REGRASP
+
+
+async def test_an_alarm_while_carrying_whose_replan_fails_stops_holding_the_rod_and_never_looks_again() -> (
+    None
+):
+    # move 3 is REORIENT (the rod in the gripper); the plan from where the alarm stopped the arm collides
+    cell = FakeCell(
+        FakeVision(seen(rod_at(0.5, 0.1))),
+        robot=FakeRobot(faults={3: Fault(ControllerError("alarm 117"))}),
+        motion=FakeMotion({2: CollisionError("the carried rod would hit the table")}),
+    )
+    outcome = await cell.run()
+    assert not outcome.success and outcome.stage_reached == "REORIENT"
+    assert "the carried rod would hit the table" in outcome.failure_reason
+    after_fault = cell.robot.commands[cell.robot.commands.index(("move", "REORIENT", False)) :]
+    assert after_fault == [("move", "REORIENT", False), ("recover",), ("stop",)]  # jaws never opened
+    assert cell.vision.calls == 1 and cell.states[-1] is CycleState.ABORT
     assert CycleState.DETECT not in cell.states[cell.states.index(CycleState.REORIENT) :]
 
 

@@ -1,11 +1,26 @@
 from pickplace.v1 import common_pb2 as _common_pb2
+from pickplace.v1 import motion_pb2 as _motion_pb2
 from google.protobuf.internal import containers as _containers
+from google.protobuf.internal import enum_type_wrapper as _enum_type_wrapper
 from google.protobuf import descriptor as _descriptor
 from google.protobuf import message as _message
-from collections.abc import Mapping as _Mapping
+from collections.abc import Iterable as _Iterable, Mapping as _Mapping
 from typing import ClassVar as _ClassVar, Optional as _Optional, Union as _Union
 
 DESCRIPTOR: _descriptor.FileDescriptor
+
+class PickStatus(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
+    __slots__ = ()
+    PICK_STATUS_UNSPECIFIED: _ClassVar[PickStatus]
+    PICK_STATUS_RUNNING: _ClassVar[PickStatus]
+    PICK_STATUS_SUCCEEDED: _ClassVar[PickStatus]
+    PICK_STATUS_FAILED: _ClassVar[PickStatus]
+    PICK_STATUS_INTERRUPTED: _ClassVar[PickStatus]
+PICK_STATUS_UNSPECIFIED: PickStatus
+PICK_STATUS_RUNNING: PickStatus
+PICK_STATUS_SUCCEEDED: PickStatus
+PICK_STATUS_FAILED: PickStatus
+PICK_STATUS_INTERRUPTED: PickStatus
 
 class TaskStatus(_message.Message):
     __slots__ = ("header", "state", "message", "progress", "picks_completed", "picks_failed", "average_cycle_time", "task", "running", "cycle_index", "last_error")
@@ -34,7 +49,7 @@ class TaskStatus(_message.Message):
     def __init__(self, header: _Optional[_Union[_common_pb2.Header, _Mapping]] = ..., state: _Optional[str] = ..., message: _Optional[str] = ..., progress: _Optional[float] = ..., picks_completed: _Optional[int] = ..., picks_failed: _Optional[int] = ..., average_cycle_time: _Optional[float] = ..., task: _Optional[str] = ..., running: _Optional[bool] = ..., cycle_index: _Optional[int] = ..., last_error: _Optional[str] = ...) -> None: ...
 
 class PickEvent(_message.Message):
-    __slots__ = ("header", "pick_id", "robot_id", "object_id", "object_class", "pick_pose", "place_pose", "grasp_quality", "cycle_time_s", "success", "stage_reached", "failure_reason", "error_code", "stage_durations_s", "attempts", "task")
+    __slots__ = ("header", "pick_id", "robot_id", "object_id", "object_class", "pick_pose", "place_pose", "grasp_quality", "cycle_time_s", "success", "stage_reached", "failure_reason", "error_code", "stage_durations_s", "attempts", "task", "status")
     class StageDurationsSEntry(_message.Message):
         __slots__ = ("key", "value")
         KEY_FIELD_NUMBER: _ClassVar[int]
@@ -58,6 +73,7 @@ class PickEvent(_message.Message):
     STAGE_DURATIONS_S_FIELD_NUMBER: _ClassVar[int]
     ATTEMPTS_FIELD_NUMBER: _ClassVar[int]
     TASK_FIELD_NUMBER: _ClassVar[int]
+    STATUS_FIELD_NUMBER: _ClassVar[int]
     header: _common_pb2.Header
     pick_id: str
     robot_id: str
@@ -74,7 +90,8 @@ class PickEvent(_message.Message):
     stage_durations_s: _containers.ScalarMap[str, float]
     attempts: int
     task: str
-    def __init__(self, header: _Optional[_Union[_common_pb2.Header, _Mapping]] = ..., pick_id: _Optional[str] = ..., robot_id: _Optional[str] = ..., object_id: _Optional[str] = ..., object_class: _Optional[str] = ..., pick_pose: _Optional[_Union[_common_pb2.Pose, _Mapping]] = ..., place_pose: _Optional[_Union[_common_pb2.Pose, _Mapping]] = ..., grasp_quality: _Optional[float] = ..., cycle_time_s: _Optional[float] = ..., success: _Optional[bool] = ..., stage_reached: _Optional[str] = ..., failure_reason: _Optional[str] = ..., error_code: _Optional[str] = ..., stage_durations_s: _Optional[_Mapping[str, float]] = ..., attempts: _Optional[int] = ..., task: _Optional[str] = ...) -> None: ...
+    status: PickStatus
+    def __init__(self, header: _Optional[_Union[_common_pb2.Header, _Mapping]] = ..., pick_id: _Optional[str] = ..., robot_id: _Optional[str] = ..., object_id: _Optional[str] = ..., object_class: _Optional[str] = ..., pick_pose: _Optional[_Union[_common_pb2.Pose, _Mapping]] = ..., place_pose: _Optional[_Union[_common_pb2.Pose, _Mapping]] = ..., grasp_quality: _Optional[float] = ..., cycle_time_s: _Optional[float] = ..., success: _Optional[bool] = ..., stage_reached: _Optional[str] = ..., failure_reason: _Optional[str] = ..., error_code: _Optional[str] = ..., stage_durations_s: _Optional[_Mapping[str, float]] = ..., attempts: _Optional[int] = ..., task: _Optional[str] = ..., status: _Optional[_Union[PickStatus, str]] = ...) -> None: ...
 
 class StartTaskRequest(_message.Message):
     __slots__ = ("task", "cycles")
@@ -101,3 +118,17 @@ class SingleCycleRequest(_message.Message):
 class GetTaskStatusRequest(_message.Message):
     __slots__ = ()
     def __init__(self) -> None: ...
+
+class TaskPlan(_message.Message):
+    __slots__ = ("header", "cycle_index", "label", "tool_path", "boxes")
+    HEADER_FIELD_NUMBER: _ClassVar[int]
+    CYCLE_INDEX_FIELD_NUMBER: _ClassVar[int]
+    LABEL_FIELD_NUMBER: _ClassVar[int]
+    TOOL_PATH_FIELD_NUMBER: _ClassVar[int]
+    BOXES_FIELD_NUMBER: _ClassVar[int]
+    header: _common_pb2.Header
+    cycle_index: int
+    label: str
+    tool_path: _containers.RepeatedCompositeFieldContainer[_common_pb2.Point]
+    boxes: _containers.RepeatedCompositeFieldContainer[_motion_pb2.CollisionBox]
+    def __init__(self, header: _Optional[_Union[_common_pb2.Header, _Mapping]] = ..., cycle_index: _Optional[int] = ..., label: _Optional[str] = ..., tool_path: _Optional[_Iterable[_Union[_common_pb2.Point, _Mapping]]] = ..., boxes: _Optional[_Iterable[_Union[_motion_pb2.CollisionBox, _Mapping]]] = ...) -> None: ...

@@ -138,7 +138,7 @@ class GraspSettings(Model):
     safe_home_joints_deg: dict[str, Vec6] = Field(
         default_factory=lambda: {
             "nova5": (180.0, 0.0, 90.0, 0.0, -90.0, 0.0),
-            "ur5e": (180.0, -90.0, 90.0, -90.0, -90.0, 0.0),
+            "ur5e": (180.0, -94.0, 80.0, -76.0, -90.0, 0.0),
             "ur3": (180.0, -90.0, 60.0, -60.0, -90.0, 0.0),
         },
         description="SAFE_HOME per robot model: above the workspace, tool down",
