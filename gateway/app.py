@@ -12,7 +12,7 @@ import contextlib
 import logging
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 from fastapi import FastAPI
@@ -20,6 +20,7 @@ from fastapi.middleware.cors import CORSMiddleware
 from pickplace.v1 import common_pb2, robot_pb2, task_pb2
 from prometheus_client import CollectorRegistry
 from sqlalchemy.ext.asyncio import AsyncEngine, AsyncSession, async_sessionmaker
+from starlette.types import Receive, Scope, Send
 
 from gateway import errors as rest_errors
 from gateway import health as health_mod
@@ -36,7 +37,7 @@ from gateway.persist import PickBuffer, PickWriter, WrittenPick
 from gateway.records import pick_json
 from gateway.security import BodySizeLimit, SecurityHeaders
 from gateway.state import Cell
-from gateway.status import StatusFastPath
+from gateway.status import fast_status_request, send_status
 from services.common.bus import Bus
 from services.common.errors import ConfigurationError, InvalidInputError, RobotError
 from services.common.keys import CellKeys
@@ -100,7 +101,8 @@ async def _poll_robot_status(cell: Cell) -> None:
 
 
 async def _status_counts(cell: Cell, written: asyncio.Event) -> None:
-    """Today's picks for the status snapshot: every status_db_period_s, and after picks are written."""
+    """Today's picks for the status snapshot: after picks are written, at midnight UTC, and every
+    status_db_period_s besides (a query holds the event loop for milliseconds: not every second)."""
 
     async def today() -> tuple[int, int]:
         async with cell.sessions() as s:
@@ -110,8 +112,16 @@ async def _status_counts(cell: Cell, written: asyncio.Event) -> None:
         await cell.status.refresh_counts(today)
         written.clear()
         with contextlib.suppress(TimeoutError):
-            async with asyncio.timeout(cell.settings.gateway.status_db_period_s):
+            async with asyncio.timeout(
+                min(cell.settings.gateway.status_db_period_s, seconds_to_midnight_utc(datetime.now(UTC)))
+            ):
                 await written.wait()
+
+
+def seconds_to_midnight_utc(now: datetime) -> float:
+    """Until the next midnight UTC (when today's picks start from 0), plus a moment."""
+    midnight = datetime(now.year, now.month, now.day, tzinfo=UTC) + timedelta(days=1)
+    return (midnight - now).total_seconds() + 0.5
 
 
 async def _republish_config(cell: Cell) -> None:
@@ -137,6 +147,23 @@ async def _sample_health(cell: Cell) -> None:
                 await s.commit()
         except Exception as exc:  # health samples are not precious; picks are
             log.warning("system health sample not stored: %s", str(exc).splitlines()[0])
+
+
+class GatewayApp(FastAPI):
+    """The FastAPI app, with ``GET /system/status`` answered from the snapshot before anything else:
+    no middleware layer, routing, dependency or validation between the socket and the bytes, so a
+    status request costs the least the event loop can spend on it. The route of the same path
+    stays (the OpenAPI document, and a request with an ``Origin`` header, which CORS must see)."""
+
+    status_path = f"{API_PREFIX}/system/status"
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] == "http" and scope["path"] == self.status_path and fast_status_request(scope):
+            cell: Cell | None = getattr(self.state, "cell", None)
+            if cell is not None:  # None: the app has not started yet
+                await send_status(cell.status, scope, send)
+                return
+        await super().__call__(scope, receive, send)
 
 
 def create_app(
@@ -248,6 +275,7 @@ def create_app(
                 on_camera=hub.on_camera,
                 on_detections=hub.on_detections,
                 on_frame=hub.on_frame,
+                on_plan=hub.on_plan,
             )
             feeds.start()
             stack.callback(feeds.close)
@@ -266,6 +294,10 @@ def create_app(
             cell.tasks = await stack.enter_async_context(asyncio.TaskGroup())
 
             async def stop_tasks() -> None:
+                # hear nothing more, then let the samples already handed to the loop reach the buffer
+                if feeds is not None:
+                    feeds.close()
+                await asyncio.sleep(0)
                 await cell.stop_jobs()
                 # last chance to write what is buffered, then keep the rest on disk for the next start
                 if len(buffer):
@@ -289,7 +321,7 @@ def create_app(
             app.state.ready.set()
             yield
 
-    app = FastAPI(
+    app = GatewayApp(
         title="pickplace gateway",
         version="1.0.0",
         description="REST API of the pickplace cell (LLD §13.1). Mutating requests need a bearer token.",
@@ -315,7 +347,6 @@ def create_app(
     if serve_web:
         web.mount(app, repo_path(gw.web_dir), settings)
 
-    app.add_middleware(StatusFastPath, path=f"{API_PREFIX}/system/status")  # inside the security headers
     app.add_middleware(SecurityHeaders, api_prefix=API_PREFIX)
     if gw.cors_origins:
         app.add_middleware(

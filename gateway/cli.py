@@ -16,7 +16,7 @@ db_app = typer.Typer(
     help="the gateway's database: pick history, system health, calibrations (Alembic migrations)",
     no_args_is_help=True,
 )
-console = Console()
+console = Console(soft_wrap=True)  # one line per message: database URLs and paths stay copyable
 
 ProfileOpt = Annotated[str | None, typer.Option("--profile", "-p", help="config profile (sim, nova5-real)")]
 ConfigOpt = Annotated[str | None, typer.Option("--config", "-c", help="extra YAML config file")]

@@ -144,13 +144,15 @@ class CellClients(ServiceShell):
     ) -> common_pb2.CommandResponse:
         """Press the e-stop on the robot driver; tell the task service in the background."""
         assert self.estop_robot is not None
-        self.spawn(self._notify_task_estop(on_task_result), "estop-task-notify")
-        # wait_for_ready: a channel still backing off after a driver restart waits (up to the timeout)
-        # for the reconnection instead of failing at once
         with _relay_errors("robot driver", self.robot_target, self.estop_channel, self.estop_timeout_s):
-            return await self.estop_robot.EmergencyStop(
+            # the driver's call is under way first; the task's notification is spawned behind it.
+            # wait_for_ready: a channel still backing off after a driver restart waits (up to the
+            # timeout) for the reconnection instead of failing at once
+            call = self.estop_robot.EmergencyStop(
                 robot_pb2.EmergencyStopRequest(), timeout=self.estop_timeout_s, wait_for_ready=True
             )
+            self.spawn(self._notify_task_estop(on_task_result), "estop-task-notify")
+            return await call
 
     async def _notify_task_estop(self, on_result: Callable[[str], None] | None) -> None:
         assert self.estop_task is not None

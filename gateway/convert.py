@@ -9,6 +9,7 @@ from typing import Any
 from google.protobuf.json_format import MessageToDict
 from pickplace.v1 import common_pb2, task_pb2
 
+from gateway.db.models import PickState
 from services.common.errors import InvalidInputError
 
 PICK_ID_MAX = 64
@@ -49,6 +50,24 @@ def validate_pick_event(ev: task_pb2.PickEvent) -> None:
             raise InvalidInputError(f"pick {ev.pick_id}: stage duration of {stage!r} is {seconds}")
     pose_dict(ev.pick_pose, "pick_pose")
     pose_dict(ev.place_pose, "place_pose")
+    if ev.status != task_pb2.PICK_STATUS_UNSPECIFIED and ev.status not in _PICK_STATES:
+        raise InvalidInputError(f"pick {ev.pick_id}: unknown status {ev.status}")
+
+
+_PICK_STATES = {
+    task_pb2.PICK_STATUS_RUNNING: PickState.RUNNING,
+    task_pb2.PICK_STATUS_SUCCEEDED: PickState.SUCCEEDED,
+    task_pb2.PICK_STATUS_FAILED: PickState.FAILED,
+    task_pb2.PICK_STATUS_INTERRUPTED: PickState.INTERRUPTED,
+}
+
+
+def pick_state(ev: task_pb2.PickEvent) -> PickState:
+    """Where the event puts its pick's record (a sender without ``status``: ``success`` says)."""
+    state = _PICK_STATES.get(ev.status)
+    if state is not None:
+        return state
+    return PickState.SUCCEEDED if ev.success else PickState.FAILED
 
 
 def pick_row(ev: task_pb2.PickEvent, default_robot_id: str) -> dict[str, Any]:
@@ -71,6 +90,7 @@ def pick_row(ev: task_pb2.PickEvent, default_robot_id: str) -> dict[str, Any]:
         "stage_reached": _clip(ev.stage_reached, 32),
         "stage_durations": dict(ev.stage_durations_s) or None,
         "attempts": int(ev.attempts) if ev.attempts else None,
+        "outcome": pick_state(ev).value,
     }
 
 

@@ -1,4 +1,5 @@
-"""Zenoh → gateway: task status, joint states, robot status, pick events, the vision debug image.
+"""Zenoh → gateway: task status, joint states, robot status, pick events (outcomes and the running
+records of cycles in progress), the vision debug image.
 
 Zenoh calls back on its own threads; each sample is decoded there and handed to the event loop
 with ``call_soon_threadsafe``. Pick events are never dropped on the way (they go to the
@@ -37,6 +38,7 @@ class BusFeeds:
         on_camera: Callable[[bytes], None],
         on_detections: Callable[[vision_pb2.DetectedObjects], None] | None = None,
         on_frame: Callable[[bytes], None] | None = None,
+        on_plan: Callable[[task_pb2.TaskPlan], None] | None = None,
     ):
         self._bus = bus
         self._keys = keys
@@ -48,10 +50,13 @@ class BusFeeds:
             (keys.joint_states, common_pb2.JointState, on_joint_state),
             (keys.robot_status, robot_pb2.RobotStatus, on_robot_status),
             (keys.pick_events, task_pb2.PickEvent, on_pick_event),
+            (keys.pick_progress, task_pb2.PickEvent, on_pick_event),  # running records, same writer
             (keys.vision_debug_image, vision_pb2.DebugImage, self._camera_handler(on_camera)),
         ]
         if on_detections is not None:
             self._routes.append((keys.detected_objects, vision_pb2.DetectedObjects, on_detections))
+        if on_plan is not None:
+            self._routes.append((keys.task_plans, task_pb2.TaskPlan, on_plan))
         # camera frames stay serialised: kept as they come (on the Zenoh thread: one reference
         # assignment), decoded only when the dashboard asks for the colour or depth view
         self._on_frame = on_frame

@@ -2,14 +2,17 @@
 
 Everything runs on the event loop (the Zenoh adapter hands samples over thread-safely).
 Each connection has a bounded queue; a slow browser loses old state messages (the newest
-matters), never blocks the others. Joint states are decimated to ``joint_rate_hz`` here.
+matters), never blocks the others. A message is serialised once, whatever the number of
+connections. Joint states are decimated to ``joint_rate_hz`` here.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import time
+from collections import deque
 from collections.abc import Callable, Iterator
 from typing import Any
 
@@ -20,8 +23,16 @@ from gateway.convert import message_dict
 from services.common.sensors import RGBDFrame
 
 CLIENT_QUEUE = 64
+TIMELINE_KEPT = 200  # the alarms-and-events timeline a dashboard gets when it connects
+TIMELINE_KINDS = frozenset({"task_status", "robot_status", "picks", "estop", "estop_task", "config"})
+PLANS_KEPT = 12  # plans of one cycle the dashboard draws (a cycle has a few; re-plans add more)
 
 Message = dict[str, Any]
+
+
+def encode(message: Message) -> str:
+    """The WebSocket text of one message."""
+    return json.dumps(message, separators=(",", ":"))
 
 
 def joint_state_json(msg: common_pb2.JointState) -> Message:
@@ -57,7 +68,7 @@ class LiveHub:
     def __init__(self, joint_rate_hz: float = 20.0):
         self._min_joint_interval_ns = int(1e9 / joint_rate_hz)
         self._next_joint_ns = 0
-        self._queues: set[asyncio.Queue[Message]] = set()
+        self._queues: set[asyncio.Queue[str]] = set()
         self.task_status: Message | None = None
         self.joint_state: Message | None = None
         self.robot_status: Message | None = None
@@ -65,6 +76,11 @@ class LiveHub:
         self.camera_jpeg: bytes | None = None
         self.camera_seq = 0
         self.detections: Message | None = None
+        self.plan: Message | None = None  # the current cycle's plans (tool paths)
+        # what the dashboard's timeline is made of, with the wall time it happened (ms since the epoch):
+        # robot status changes, task state changes, failed picks, e-stops, settings changes
+        self.timeline: deque[Message] = deque(maxlen=TIMELINE_KEPT)
+        self._timeline_task_state: str | None = None
         self.frame_payload: bytes | None = None  # the camera's newest RGBDFrame, serialised (bus)
         self.frame_object: RGBDFrame | None = None  # or as the in-process camera gave it (embedded cell)
         self.frame_count = 0
@@ -131,13 +147,30 @@ class LiveHub:
         self.frame_object = frame
         self.frame_count += 1
 
+    def on_plan(self, msg: task_pb2.TaskPlan) -> None:
+        """A plan the task got from motion: kept with the others of its cycle (a new cycle starts afresh),
+        the newest ``PLANS_KEPT``; the dashboard draws them as the current cycle's planned path."""
+        if self.plan is None or self.plan["cycle_index"] != msg.cycle_index:
+            self.plan = {"cycle_index": msg.cycle_index, "source": "task plans", "plans": []}
+        self.plan["plans"] = [
+            *self.plan["plans"][-(PLANS_KEPT - 1) :],
+            {
+                "seq": msg.header.seq,
+                "stamp_ns": msg.header.stamp_ns,
+                "label": msg.label,
+                "path": [[round(p.x, 4), round(p.y, 4), round(p.z, 4)] for p in msg.tool_path],
+            },
+        ]
+        self._broadcast({"type": "plan", "data": self.plan})
+
     def on_event(self, kind: str, data: Message) -> None:
         """Anything else worth showing (e-stop pressed, config changed)."""
         self._broadcast({"type": kind, "data": data})
 
     # ----------------------------------------------------------------- outputs
     def snapshot(self) -> list[Message]:
-        out: list[Message] = []
+        """What a new connection gets first: the timeline so far, then the current state."""
+        out: list[Message] = [{"type": "timeline", "data": list(self.timeline)}]
         if self.task_status is not None:
             out.append({"type": "task_status", "data": self.task_status})
         if self.robot_status is not None:
@@ -148,13 +181,16 @@ class LiveHub:
             out.append({"type": "camera", "data": {"seq": self.camera_seq, "bytes": len(self.camera_jpeg)}})
         if self.detections is not None:
             out.append({"type": "detections", "data": self.detections})
+        if self.plan is not None:
+            out.append({"type": "plan", "data": self.plan})
         return out
 
     @contextlib.contextmanager
-    def connection(self) -> Iterator[asyncio.Queue[Message]]:
-        q: asyncio.Queue[Message] = asyncio.Queue(CLIENT_QUEUE)
+    def connection(self) -> Iterator[asyncio.Queue[str]]:
+        """A queue of the messages' texts: the current state first, then every change."""
+        q: asyncio.Queue[str] = asyncio.Queue(CLIENT_QUEUE)
         for m in self.snapshot():
-            q.put_nowait(m)
+            q.put_nowait(encode(m))
         self._queues.add(q)
         try:
             yield q
@@ -165,12 +201,31 @@ class LiveHub:
     def connections(self) -> int:
         return len(self._queues)
 
+    def _remember(self, message: Message) -> None:
+        kind = message["type"]
+        if kind == "task_status":  # every 0.5 s: only a new state is news
+            state = message["data"].get("state")
+            if state == self._timeline_task_state:
+                return
+            self._timeline_task_state = state
+        elif kind == "picks":
+            failed = [p for p in message["data"] if not p.get("success")]
+            if not failed:
+                return
+            message = {"type": kind, "data": failed}
+        self.timeline.append({"at_ms": time.time_ns() // 1_000_000, **message})
+
     def _broadcast(self, message: Message) -> None:
-        if self.on_change is not None and message["type"] not in ("joint_state", "detections"):
+        if message["type"] in TIMELINE_KINDS:
+            self._remember(message)
+        if self.on_change is not None and message["type"] not in ("joint_state", "detections", "plan"):
             self.on_change(message["type"])
+        if not self._queues:
+            return
+        text = encode(message)
         for q in list(self._queues):
             if q.full():
                 with contextlib.suppress(asyncio.QueueEmpty):
                     q.get_nowait()
-            q.put_nowait(message)
+            q.put_nowait(text)
             self.sent += 1

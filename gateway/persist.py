@@ -6,8 +6,9 @@ order holds). :class:`PickWriter` takes batches from the front, inserts them wit
 "ON CONFLICT (pick_id) DO NOTHING", and only then removes them from the buffer: an outage
 (or a crash) between insert and removal means the batch is sent again, and the unique
 ``pick_id`` keeps it stored once. While the database is unreachable it retries with capped
-exponential backoff. At shutdown whatever is still in memory is spilled to the file, which the
-next start reads first.
+exponential backoff, on its own clock and sleep (injectable: a test can hold the database away
+for minutes of the writer's time in a second), and counts how long each outage lasted on it. At
+shutdown whatever is still in memory is spilled to the file, which the next start reads first.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import contextlib
 import json
 import logging
 import os
+import time
 from collections import deque
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
@@ -143,6 +145,8 @@ class PickWriter:
         retry_initial_s: float = 0.2,
         retry_max_s: float = 5.0,
         on_written: Callable[[list[WrittenPick]], None] | None = None,
+        clock: Callable[[], float] = time.monotonic,
+        sleep: Callable[[float], Awaitable[None]] = asyncio.sleep,
     ):
         self.buffer = buffer
         self._insert = insert
@@ -150,6 +154,7 @@ class PickWriter:
         self.retry_initial_s = retry_initial_s
         self.retry_max_s = retry_max_s
         self._on_written = on_written
+        self._clock, self._sleep = clock, sleep
         self._wake = asyncio.Event()
         self._empty = asyncio.Event()
         self._update_empty()
@@ -157,6 +162,8 @@ class PickWriter:
         self.last_error: str | None = None
         self.written = 0
         self.rejected = 0
+        self.outage_since: float | None = None  # on the writer's clock, while the database is away
+        self.longest_outage_s = 0.0
 
     def offer(self, ev: task_pb2.PickEvent) -> None:
         self.buffer.put(ev)
@@ -193,11 +200,11 @@ class PickWriter:
                     self._update_empty()
                     continue
                 self._outage(failure, delay)
-                await asyncio.sleep(delay)  # new events do not shorten the backoff
+                await self._sleep(delay)  # new events do not shorten the backoff
                 delay = min(delay * 2, self.retry_max_s)
                 continue
             if not self.database_ok:
-                log.warning("database back: writing %d buffered pick event(s)", len(self.buffer))
+                self._back()
             self.database_ok, self.last_error, delay = True, None, self.retry_initial_s
             self.buffer.drop(len(batch))
             self.written += len(new)
@@ -228,11 +235,22 @@ class PickWriter:
             self.buffer.drop(1)
         return None
 
+    def outage_s(self) -> float:
+        """How long the database has been away, on the writer's clock (0 while it is there)."""
+        return 0.0 if self.outage_since is None else self._clock() - self.outage_since
+
     def _outage(self, exc: BaseException, delay: float) -> None:
         text = f"{type(exc).__name__}: {exc}".splitlines()[0][:300]
         if self.database_ok:
             log.error("database unavailable, buffering pick events (retry in %.1fs): %s", delay, text)
+            self.outage_since = self._clock()
         self.database_ok, self.last_error = False, text
+
+    def _back(self) -> None:
+        lasted = self.outage_s()
+        self.longest_outage_s = max(self.longest_outage_s, lasted)
+        self.outage_since = None
+        log.warning("database back after %.1f s: writing %d buffered pick event(s)", lasted, len(self.buffer))
 
     async def flush(self, timeout_s: float) -> None:
         """Write everything buffered now, without retrying (at shutdown); raises on failure."""

@@ -9,6 +9,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from gateway.contract import JsonInt
+from gateway.db.models import PickState
 from services.common.modes import TaskKind
 
 
@@ -103,6 +104,9 @@ class PickRecord(BaseModel):
     object_class: str | None = None
     cycle_time: float | None = None
     success: bool
+    outcome: PickState = Field(
+        description="succeeded, failed, or interrupted (a crash or a stop cut the cycle at stage_reached)",
+    )
     grasp_quality: float | None = None
     error_code: str | None = None
     error_message: str | None = None
@@ -162,3 +166,19 @@ class ConfigUpdateResult(BaseModel):
     applied_now: list[str] = []  # in effect as the services receive the update (well under a second)
     applied_next_cycle: list[str] = []  # taken at the next key-pose cycle / twin scene
     note: str = "changes last until the cell restarts; keep them in a config file or profile"
+
+
+class CameraInfo(BaseModel):
+    """The camera as the dashboard's 3D view draws it: its pinhole and its pose in the base frame."""
+
+    width: int = Field(description="image width, px")
+    height: int = Field(description="image height, px")
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    T_base_camera: list[list[float]] | None = Field(
+        description="4×4, camera optical frame (x right, y down, z forward) → base frame, metres; "
+        "null when the cell has neither a calibration file nor a manual pose"
+    )
+    pose_source: str = Field(description="where the pose comes from (the calibration file, the manual pose)")

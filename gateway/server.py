@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import gc
 import logging
 import socket
 from collections.abc import AsyncIterator, Iterator
@@ -157,4 +158,13 @@ async def serve(settings: Settings) -> None:
     app = create_app(settings)
     async with GatewayServer(app, settings.gateway.host, settings.gateway.port) as server:
         log.info("dashboard and API on %s (docs at /docs)", server.url)
+        settle_heap()
         await server.wait()
+
+
+def settle_heap() -> None:
+    """What start-up built (modules, the app, the clients) lives until the process ends: collected once
+    and moved out of the collector's view, so a full collection later walks only what the running
+    gateway allocates (one over the whole start-up heap held the event loop for 190-240 ms of CPU)."""
+    gc.collect()
+    gc.freeze()

@@ -14,11 +14,12 @@ import time
 from collections.abc import Awaitable, Callable
 from typing import Any, Literal, Protocol
 
-from starlette.types import ASGIApp, Receive, Scope, Send
+from starlette.types import Scope, Send
 
 from gateway.live import LiveHub
 from gateway.persist import PickWriter
 from gateway.schemas import HealthSummary, RobotSummary, SystemStatus, TaskSummary
+from gateway.security import SECURITY_HEADERS
 
 log = logging.getLogger("pickplace.gateway.status")
 
@@ -124,24 +125,19 @@ class StatusBoard:
         self.invalidate()
 
 
-class StatusFastPath:
-    """Answers ``GET {path}`` with the snapshot's bytes before FastAPI routes the request (pure ASGI:
-    no routing, no dependency injection, no validation); everything else passes through. The
-    FastAPI route of the same path stays, for the OpenAPI document and the same answer."""
+def fast_status_request(scope: Scope) -> bool:
+    """A plain ``GET``/``HEAD`` the snapshot answers (one with an ``Origin`` goes the long way, via CORS)."""
+    return scope["method"] in ("GET", "HEAD") and not any(k == b"origin" for k, _ in scope["headers"])
 
-    def __init__(self, app: ASGIApp, path: str):
-        self.app = app
-        self.path = path
 
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http" or scope["path"] != self.path or scope["method"] not in ("GET", "HEAD"):
-            await self.app(scope, receive, send)
-            return
-        board: StatusBoard | None = getattr(getattr(scope["app"].state, "cell", None), "status", None)
-        if board is None:  # the app has not started yet
-            await self.app(scope, receive, send)
-            return
-        body = board.json()
-        headers = [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]
-        await send({"type": "http.response.start", "status": 200, "headers": headers})
-        await send({"type": "http.response.body", "body": b"" if scope["method"] == "HEAD" else body})
+async def send_status(board: StatusBoard, scope: Scope, send: Send) -> None:
+    """The snapshot's bytes as the response, with the headers every API answer carries."""
+    body = board.json()
+    headers = [
+        (b"content-type", b"application/json"),
+        (b"content-length", str(len(body)).encode()),
+        (b"cache-control", b"no-store"),
+        *SECURITY_HEADERS.items(),
+    ]
+    await send({"type": "http.response.start", "status": 200, "headers": headers})
+    await send({"type": "http.response.body", "body": b"" if scope["method"] == "HEAD" else body})

@@ -3,10 +3,13 @@
 Poses and parameters are JSON (JSONB on PostgreSQL). Timestamps are timezone-aware UTC.
 ``picks.pick_id`` is the task's idempotency key: a pick event is stored once however often
 it arrives. The failure reason of a pick goes to the LLD's ``error_message`` column.
+``picks.outcome`` is where the pick's record stands (:class:`PickState`): a row is written when
+its cycle starts (running), updated as it goes, and fixed at its first outcome (:data:`PICK_STATE_RANK`).
 """
 
 from __future__ import annotations
 
+import enum
 from datetime import UTC, datetime
 from typing import Any
 
@@ -35,6 +38,27 @@ def utcnow() -> datetime:
     return datetime.now(UTC)
 
 
+class PickState(enum.StrEnum):
+    RUNNING = "running"  # the cycle started and has not ended (or the gateway has not heard yet)
+    SUCCEEDED = "succeeded"
+    FAILED = "failed"
+    INTERRUPTED = "interrupted"  # a crash (or an operator's stop) cut the cycle at stage_reached
+
+
+# A row only moves forward: from running to interrupted to the cycle's own outcome, and the first outcome
+# stored is the one kept (a duplicate, or an "interrupted" sent again after the task had reported the end,
+# changes nothing). "Interrupted" ranks below the outcome the cycle itself reports: it is what the gateway
+# or a restarted task concludes when it has not heard, and the cycle's own word may still be on its way
+# (a newer cycle's start can reach the gateway before the older cycle's outcome on the other key).
+PICK_STATE_RANK = {
+    PickState.RUNNING: 0,
+    PickState.INTERRUPTED: 1,
+    PickState.SUCCEEDED: 2,
+    PickState.FAILED: 2,
+}
+REPORTED_OUTCOMES = (PickState.SUCCEEDED, PickState.FAILED)
+
+
 class Base(DeclarativeBase):
     pass
 
@@ -60,12 +84,14 @@ class Pick(Base):
     stage_reached: Mapped[str | None] = mapped_column(String(32))
     stage_durations: Mapped[dict[str, float] | None] = mapped_column(JsonType)  # state -> s
     attempts: Mapped[int | None] = mapped_column(Integer)
+    outcome: Mapped[str] = mapped_column(String(16), nullable=False, server_default=PickState.FAILED.value)
 
     __table_args__ = (
         UniqueConstraint("pick_id", name="uq_picks_pick_id"),
         Index("idx_picks_timestamp", text("timestamp DESC"), text("id DESC")),
         Index("idx_picks_robot_id", "robot_id"),
         Index("idx_picks_success", "success"),
+        Index("idx_picks_outcome", "outcome"),
     )
 
 

@@ -4,20 +4,22 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 
 from fastapi import APIRouter, HTTPException, Response, WebSocket, WebSocketDisconnect
 from google.protobuf.message import DecodeError
 
-from gateway.camera import CameraView, frame_jpeg, sensor_frame_jpeg
+from gateway.camera import CameraView, camera_pose, frame_intrinsics, frame_jpeg, sensor_frame_jpeg
 from gateway.contract import errors
 from gateway.deps import CellDep
+from gateway.live import encode
+from gateway.schemas import CameraInfo
 from services.common.errors import InvalidInputError
 from services.common.settings import CONFIG_DIR
 
 router = APIRouter(tags=["live"])
 
 PING_INTERVAL_S = 15.0
+PING = encode({"type": "ping", "data": {}})
 
 
 @router.websocket("/live")
@@ -34,10 +36,10 @@ async def live(ws: WebSocket) -> None:
             while not reader.done():
                 try:
                     async with asyncio.timeout(PING_INTERVAL_S):
-                        msg = await queue.get()
+                        text = await queue.get()
                 except TimeoutError:
-                    msg = {"type": "ping", "data": {}}
-                await ws.send_text(json.dumps(msg, separators=(",", ":")))
+                    text = PING
+                await ws.send_text(text)
         except (WebSocketDisconnect, RuntimeError):
             pass
         finally:
@@ -88,6 +90,34 @@ async def camera(cell: CellDep, view: CameraView = CameraView.OVERLAY) -> Respon
                 raise HTTPException(404, f"the newest camera frame cannot be shown: {exc}") from exc
             hub.view_cache = (key, jpeg)
     return Response(jpeg, media_type="image/jpeg", headers={"Cache-Control": "no-store"})
+
+
+@router.get("/camera/info", response_model=CameraInfo, responses=errors(404))
+async def camera_info(cell: CellDep) -> CameraInfo:
+    """The camera for the 3D view's frustum: the newest frame's pinhole, and the camera's pose in the
+    base frame as vision takes it (the calibration file, else the manual pose). 404 before a frame."""
+    hub = cell.hub
+    payload, frame = hub.frame_payload, hub.frame_object
+    try:
+        if frame is not None:
+            k = frame.intrinsics
+        elif payload is not None:
+            k = await asyncio.to_thread(frame_intrinsics, payload)
+        else:
+            raise HTTPException(404, "no camera frame received yet (camera not publishing)")
+    except (InvalidInputError, DecodeError) as exc:
+        raise HTTPException(404, f"the newest camera frame has no usable intrinsics: {exc}") from exc
+    T, source = camera_pose(cell.settings.vision.calibration)
+    return CameraInfo(
+        width=k.width,
+        height=k.height,
+        fx=k.fx,
+        fy=k.fy,
+        cx=k.cx,
+        cy=k.cy,
+        T_base_camera=None if T is None else [[round(float(v), 6) for v in row] for row in T],
+        pose_source=source,
+    )
 
 
 @router.get(

@@ -62,6 +62,8 @@ async def test_picks_paging_detail_and_404(database, settings, tmp_path):
         assert r.status_code == 200 and r.json() == []
         r = await c.get("/api/v1/picks", params={"success": "false", "limit": 1000})
         assert r.headers["X-Total-Count"] == "15" and all(not p["success"] for p in r.json())
+        assert {p["outcome"] for p in r.json()} == {"failed"}
+        assert {p["outcome"] for p in first if p["success"]} == {"succeeded"}
 
         detail = (await c.get(f"/api/v1/picks/{first[0]['id']}")).json()
         assert detail["pick_id"] == ids[-1] and detail["pick_pose"]["qw"] == 1.0
@@ -414,3 +416,33 @@ async def test_embedded_gateway_generates_a_token_and_migrates(settings, sqlite_
             )
             assert r.status_code == 200
             assert (await c.put("/api/v1/config", json={"robot": {"speed_ratio": 41}})).status_code == 401
+
+
+async def test_a_cycle_cut_by_a_crash_is_listed_as_interrupted(database, settings, tmp_path):
+    from pickplace.v1 import task_pb2
+
+    await migrate_up(database)
+    started = pick_event(0, success=False)
+    started.status = task_pb2.PICK_STATUS_RUNNING
+    started.stage_reached = "REORIENT"
+    cut = task_pb2.PickEvent()
+    cut.CopyFrom(started)
+    cut.status = task_pb2.PICK_STATUS_INTERRUPTED
+    cut.failure_reason, cut.error_code = (
+        "REORIENT: interrupted: the task process ended",
+        "CycleInterruptedError",
+    )
+    engine = make_engine(database, database.url)
+    try:
+        for ev in (started, cut):
+            async with session_factory(engine)() as s:
+                await insert_picks(s, [pick_row(ev, "robot_01")])
+                await s.commit()
+    finally:
+        await engine.dispose()
+    async with running_gateway(gateway_settings(settings, database, tmp_path)) as gw:
+        (row,) = (await gw.client.get("/api/v1/picks")).json()
+        assert (row["pick_id"], row["outcome"], row["success"]) == (cut.pick_id, "interrupted", False)
+        assert row["stage_reached"] == "REORIENT"
+        detail = (await gw.client.get(f"/api/v1/picks/{row['id']}")).json()
+        assert detail["outcome"] == "interrupted"

@@ -1,7 +1,8 @@
 """End to end in headless Chromium (Debian's /usr/bin/chromium, driven by Playwright).
 
 The real robot-driver service and the simulated Dobot feed the dashboard; a scripted task
-service answers Start. The test loads the dashboard, sees live joint states, presses Start and
+service answers Start. The test loads the dashboard, sees live joint states, the camera's frustum
+and the planned path in the 3D view (``artifacts/robot3d-frustum-plan.png``), presses Start and
 sees the pick appear in the history, presses E-stop while the arm moves and sees the state
 change and the arm stop. A screenshot is saved to ``artifacts/dashboard.png``.
 """
@@ -9,12 +10,13 @@ change and the arm stop. A screenshot is saved to ``artifacts/dashboard.png``.
 from __future__ import annotations
 
 import asyncio
+import re
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
-from pickplace.v1 import vision_pb2
+from pickplace.v1 import task_pb2, vision_pb2
 
 from services.common.bus import Bus
 from services.common.keys import CellKeys
@@ -59,6 +61,26 @@ def camera_jpeg() -> bytes:
     return buf.tobytes()
 
 
+def rgbd_frame(w: int = 640, h: int = 480) -> vision_pb2.RGBDFrame:
+    """A camera frame for its pinhole (the D435i's at 640×480); the pixels do not matter here."""
+    return vision_pb2.RGBDFrame(
+        intrinsics=vision_pb2.CameraIntrinsics(width=w, height=h, fx=615.0, fy=615.0, cx=320.0, cy=240.0),
+        color_rgb8=bytes(w * h * 3),
+        depth_u16=bytes(w * h * 2),
+        depth_scale=0.001,
+    )
+
+
+def task_plan(cycle: int, seq: int, label: str, n: int) -> task_pb2.TaskPlan:
+    """A plan as the task publishes it: the tool tip's path, here an arc from above the rod to above the table."""
+    s = np.linspace(0.0, 1.0, n)
+    plan = task_pb2.TaskPlan(cycle_index=cycle, label=label)
+    plan.header.seq = seq
+    for x, y, z in zip(0.45 + 0.1 * s, -0.2 + 0.4 * s, 0.05 + 0.25 * np.sin(np.pi * s), strict=True):
+        plan.tool_path.add(x=float(x), y=float(y), z=float(z))
+    return plan
+
+
 async def test_dashboard_live_start_pick_and_estop(robot_settings, sim_server, sqlite_db, tmp_path):
     from playwright.async_api import async_playwright, expect
 
@@ -92,8 +114,25 @@ async def test_dashboard_live_start_pick_and_estop(robot_settings, sim_server, s
                 )
 
                 # the vision service's debug image appears in the camera panel
-                bus.publish(CellKeys(s.cell_id).vision_debug_image, vision_pb2.DebugImage(jpeg=camera_jpeg()))
+                keys = CellKeys(s.cell_id)
+                bus.publish(keys.vision_debug_image, vision_pb2.DebugImage(jpeg=camera_jpeg()))
                 await expect(page.locator("#camera-img")).to_be_visible(timeout=10_000)
+
+                # the 3D view: the camera's frustum (a frame's pinhole, the calibrated pose) and the
+                # current cycle's planned path (the task's plans on the bus; a new cycle starts afresh)
+                view3d = page.locator("#robot3d")
+                bus.publish(keys.camera_frames, rgbd_frame())
+                bus.publish(keys.vision_debug_image, vision_pb2.DebugImage(jpeg=camera_jpeg()))
+                await expect(view3d).to_have_attribute("data-frustum", "true", timeout=15_000)
+                bus.publish(keys.task_plans, task_plan(3, 1, "APPROACH+GRASP", 20))
+                bus.publish(keys.task_plans, task_plan(3, 2, "LIFT+PLACE", 30))
+                await expect(view3d).to_have_attribute("data-plan-points", "50", timeout=10_000)
+                await expect(view3d).to_have_attribute("data-plan-cycle", "3")
+                ARTIFACTS.mkdir(exist_ok=True)
+                await view3d.screenshot(path=str(ARTIFACTS / "robot3d-frustum-plan.png"))
+                bus.publish(keys.task_plans, task_plan(4, 3, "APPROACH", 12))
+                await expect(view3d).to_have_attribute("data-plan-points", "12", timeout=10_000)
+                await expect(view3d).to_have_attribute("data-plan-cycle", "4")
 
                 # Start → the task service runs one cycle → its pick shows up in the history
                 await page.get_by_role("button", name="start the task").click()
@@ -115,9 +154,13 @@ async def test_dashboard_live_start_pick_and_estop(robot_settings, sim_server, s
                     await move
                 await wait_until(lambda: task.estops == 1, 5.0, "the task service to hear of the e-stop")
 
-                q1 = robot.driver.client.feedback.q.copy()
-                await asyncio.sleep(0.3)
-                q2 = robot.driver.client.feedback.q.copy()
+                # at rest: the same joints 0.3 s later on the controller's clock
+                fb1 = robot.driver.client.feedback
+                q1 = fb1.q.copy()
+                fb2 = await robot.driver.client.wait_feedback(
+                    lambda fb: fb.timestamp_ms >= fb1.timestamp_ms + 300, 10.0
+                )
+                q2 = fb2.q.copy()
                 assert q1[0] < np.deg2rad(119.0), "the arm reached its goal: the e-stop did not stop it"
                 assert np.allclose(q1, q2, atol=1e-9), f"the arm still moves after the e-stop: {q1} → {q2}"
 
@@ -129,6 +172,17 @@ async def test_dashboard_live_start_pick_and_estop(robot_settings, sim_server, s
 
                 ARTIFACTS.mkdir(exist_ok=True)
                 await page.screenshot(path=str(ARTIFACTS / "dashboard.png"))
+
+                # a dashboard opened now shows what went before: the gateway's timeline, replayed
+                late = await browser.new_page(viewport={"width": 1280, "height": 800})
+                late.on("pageerror", lambda exc: errors.append(str(exc)))
+                await late.goto(f"{gw.server.url}/")
+                timeline = late.get_by_test_id("events")
+                await expect(timeline).to_have_attribute(
+                    "data-replayed", re.compile(r"^[1-9]\d*$"), timeout=15_000
+                )
+                await expect(timeline).to_contain_text("E-STOP pressed")
+                await expect(timeline).to_contain_text("E-STOP active on the robot")
                 assert not errors, f"JavaScript errors on the page: {errors}"
             finally:
                 await browser.close()

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from pickplace.v1 import common_pb2, vision_pb2
 
+from gateway.camera import camera_pose
 from services.common.bus import Bus
 from services.common.keys import CellKeys
 from tests.gateway.conftest import gateway_settings, migrate_up, running_gateway, wait_until
@@ -38,8 +39,17 @@ async def test_colour_depth_views_and_detections(settings, sqlite_db, tmp_path) 
         assert r.status_code == 404 and "camera frame" in r.json()["detail"]
         assert (await c.get("/api/v1/camera/latest.jpg", params={"view": "x-ray"})).status_code == 422
 
+        assert (await c.get("/api/v1/camera/info")).status_code == 404  # no frame yet
+
         bus.publish(keys.camera_frames, rgbd())
         await wait_until(lambda: gw.cell.hub.frame_count >= 1, 10, "the camera frame")
+        info = (await c.get("/api/v1/camera/info")).json()  # the 3D view's frustum
+        assert (info["width"], info["height"], info["fx"], info["cx"]) == (64, 48, 50, 32)
+        T_file, _ = camera_pose(s.vision.calibration)
+        if T_file is None:
+            assert info["T_base_camera"] is None
+        else:
+            assert np.allclose(info["T_base_camera"], T_file, atol=1e-6) and info["pose_source"]
         r = await c.get("/api/v1/camera/latest.jpg", params={"view": "color"})
         assert r.status_code == 200 and r.headers["content-type"] == "image/jpeg"
         img = cv2.imdecode(np.frombuffer(r.content, np.uint8), cv2.IMREAD_COLOR)
@@ -70,3 +80,27 @@ async def test_colour_depth_views_and_detections(settings, sqlite_db, tmp_path) 
         }
         assert d["objects"][1]["color"] == "red" and d["objects"][1]["visibility"] == "occluded"
         assert d["objects"][1]["base"] is None  # no base-frame pose without has_base
+
+
+def test_the_camera_pose_is_the_calibration_files_else_the_manual_one(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from services.common.errors import ConfigurationError
+    from services.common.settings import CalibrationSettings
+
+    T = np.eye(4)
+    T[:3, 3] = (0.9, 0.0, 0.7)
+    f = tmp_path / "cal.yaml"
+    f.write_text("T_base_camera: " + str(T.tolist()) + "\n")
+    pose, source = camera_pose(CalibrationSettings(file=str(f)))
+    assert pose is not None and np.allclose(pose, T) and "cal.yaml" in source
+
+    manual = CalibrationSettings(
+        file=str(tmp_path / "none.yaml"), manual_translation_m=(0.93, 0, 0.66), manual_rpy_deg=(-145.4, 0, 90)
+    )
+    pose, source = camera_pose(manual)
+    assert pose is not None and np.allclose(pose[:3, 3], (0.93, 0, 0.66)) and source.startswith("manual")
+    assert pose[2, 2] < 0  # the optical axis looks down at the table
+    assert camera_pose(CalibrationSettings(file=str(tmp_path / "none.yaml")))[0] is None
+
+    f.write_text("T_base_camera: [[1, 2], [3, 4]]\n")
+    with pytest.raises(ConfigurationError, match=r"cal\.yaml"):
+        camera_pose(CalibrationSettings(file=str(f)))

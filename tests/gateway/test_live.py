@@ -10,7 +10,6 @@ import asyncio
 import itertools
 import json
 import statistics
-import time
 
 import pytest
 import websockets
@@ -45,30 +44,45 @@ async def test_websocket_streams_decimated_joints_status_and_picks(
                 joints: list[dict] = []
                 others: dict[str, list[dict]] = {}
                 picks_sent = [pick_event(0), pick_event(1, success=False)]
-                t0 = time.monotonic()
-                published = False
-                async with asyncio.timeout(15.0):
-                    while time.monotonic() - t0 < 2.0 or "picks" not in others or "task_status" not in others:
-                        if not published and time.monotonic() - t0 > 0.5:
-                            # Zenoh subscriptions propagate between sessions asynchronously; publish once
-                            # the joint states show that the gateway's session is connected
-                            bus.publish(keys.task_status, task_pb2.TaskStatus(state="PLAN", progress=0.25))
-                            for ev in picks_sent:
-                                bus.publish(keys.pick_events, ev)
-                            published = True
+                sent_ids = {e.pick_id for e in picks_sent}
+                since_published: int | None = None
+
+                def got_picks() -> set[str]:
+                    return {p["pick_id"] for batch in others.get("picks", []) for p in batch}
+
+                def span_s() -> float:  # controller time the joint states cover
+                    return (
+                        (joints[-1]["source_stamp_ns"] - joints[0]["source_stamp_ns"]) / 1e9
+                        if joints
+                        else 0.0
+                    )
+
+                async with asyncio.timeout(90.0):  # a safety net only: the loop ends on what it receives
+                    while span_s() < 2.0 or got_picks() != sent_ids or "task_status" not in others:
                         msg = json.loads(await ws.recv())
                         if msg["type"] == "joint_state":
                             joints.append(msg["data"])
                         else:
                             others.setdefault(msg["type"], []).append(msg["data"])
-                elapsed = time.monotonic() - t0
+                        # Zenoh subscriptions propagate between sessions asynchronously: publish once
+                        # joint states show the gateway's session connected, and again every 10 states
+                        # until both have come back (a pick is stored and reported once by its pick_id)
+                        waiting = got_picks() != sent_ids or "task_status" not in others
+                        if joints and waiting and (since_published is None or since_published >= 10):
+                            bus.publish(keys.task_status, task_pb2.TaskStatus(state="PLAN", progress=0.25))
+                            for ev in picks_sent:
+                                bus.publish(keys.pick_events, ev)
+                            since_published = 0
+                        elif since_published is not None and msg["type"] == "joint_state":
+                            since_published += 1
     # Decimated on the controller's clock (the feedback TimeStamp each state carries): 125 Hz from the
     # driver, 20 Hz to the browser on a 50 ms schedule (the exact schedule is unit-tested in test_units).
     # Judged by the stamps, never by arrival times: at most one state per 50 ms slot, about 50 ms apart
-    # (a busy simulator can skip feedback ticks, which moves single states within their slot).
+    # (a busy simulator slows its clock, which the stamps follow; a state Zenoh or the queue to this
+    # client dropped moves the next one within its slot or leaves a slot empty, never fills one twice).
     stamps = [j["source_stamp_ns"] for j in joints]
     gaps_ms = [(b - a) / 1e6 for a, b in itertools.pairwise(stamps)]
-    assert len(joints) >= 10, f"only {len(joints)} joint states in {elapsed:.1f}s"
+    assert len(joints) >= 20, f"only {len(joints)} joint states in {span_s():.2f} s of the controller's clock"
     assert all(g > 0 for g in gaps_ms), gaps_ms
     assert 40.0 <= statistics.median(gaps_ms) <= 80.0, gaps_ms
     # at most one state per 50 ms slot of the hub's schedule, which began before this connection's first
@@ -77,6 +91,6 @@ async def test_websocket_streams_decimated_joints_status_and_picks(
     assert joints[-1]["name"][0] == "joint1" and abs(joints[-1]["position"][2] - 1.5707963) < 1e-5
     assert others["task_status"][-1]["state"] == "PLAN"
     got = [p for batch in others["picks"] for p in batch]
-    assert sorted(p["pick_id"] for p in got) == sorted(e.pick_id for e in picks_sent)
+    assert sorted(p["pick_id"] for p in got) == sorted(sent_ids)  # each reported once
     assert all(p["id"] >= 1 for p in got)  # database ids: sent after the rows were written
     assert "robot_status" in others and others["robot_status"][-1]["connected"] is True

@@ -4,14 +4,19 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import time
 from collections.abc import AsyncIterator, Sequence
+from datetime import UTC, datetime
 
 import pytest
 from pickplace.v1 import task_pb2
 from sqlalchemy import func, select, text
 
+from gateway.convert import pick_row
+from gateway.db import migrate
 from gateway.db.engine import make_engine, session_factory
-from gateway.db.models import Pick
+from gateway.db.models import Pick, PickState
+from gateway.db.repository import PickRepository, insert_picks
 from gateway.persist import PickBuffer, PickWriter
 from services.common.bus import Bus
 from services.common.errors import InvalidInputError
@@ -292,3 +297,285 @@ async def test_picks_buffered_at_shutdown_are_written_by_the_next_start(settings
                 r = await gw.client.get("/api/v1/picks")
                 assert sorted(p["pick_id"] for p in r.json()) == sorted(e.pick_id for e in events)
         assert spill.read_text() == ""
+
+
+# ---------------------------------------------------------------------------- a row per started cycle
+def cycle_event(
+    pick_id: str, status: int, stage: str, *, robot_id: str = "robot_01", success: bool = False
+) -> task_pb2.PickEvent:
+    """One of a cycle's records as the task publishes it: running ones carry only what is known yet."""
+    ev = task_pb2.PickEvent(
+        pick_id=pick_id,
+        robot_id=robot_id,
+        status=status,
+        stage_reached=stage,
+        success=success,
+        task="stand-rod",
+    )
+    ev.header.stamp_ns = time.time_ns()
+    if stage not in ("INIT", "DETECT"):
+        ev.object_id, ev.object_class = "rod@0.500,0.100", "rod"
+    if status != task_pb2.PICK_STATUS_RUNNING:
+        ev.cycle_time_s = 9.5
+        if not success:
+            ev.failure_reason, ev.error_code = f"{stage}: alarm 117", "ControllerError"
+    return ev
+
+
+RUNNING, SUCCEEDED = task_pb2.PICK_STATUS_RUNNING, task_pb2.PICK_STATUS_SUCCEEDED
+FAILED, INTERRUPTED = task_pb2.PICK_STATUS_FAILED, task_pb2.PICK_STATUS_INTERRUPTED
+
+
+async def _store(sessions, events: list[task_pb2.PickEvent]) -> list[str]:  # type: ignore[no-untyped-def]
+    async with sessions() as s:
+        done = await insert_picks(s, [pick_row(ev, "robot_01") for ev in events])
+        await s.commit()
+    return [p for _, p in done]
+
+
+async def _rows(sessions) -> dict[str, Pick]:  # type: ignore[no-untyped-def]
+    async with sessions() as s:
+        return {p.pick_id: p for p in (await s.scalars(select(Pick))).all()}
+
+
+async def test_a_cycle_has_its_row_from_the_start_and_keeps_its_first_outcome(database: DatabaseSettings):
+    await migrate_up(database)
+    engine = make_engine(database, database.url)
+    sessions = session_factory(engine)
+    try:
+        assert await _store(sessions, [cycle_event("a", RUNNING, "INIT")]) == []  # not finished: not reported
+        rows = await _rows(sessions)
+        assert rows["a"].outcome == PickState.RUNNING and rows["a"].stage_reached == "INIT"
+        started_at = rows["a"].timestamp
+        assert await _store(sessions, [cycle_event("a", RUNNING, "GRASP")]) == []
+        assert (await _rows(sessions))["a"].stage_reached == "GRASP"
+        async with sessions() as s:  # the history lists picks that ended: not this one yet
+            repo = PickRepository(s)
+            assert await repo.count() == 0 and await repo.page(10, 0) == []
+        # the outcome: reported once, the start time kept, what the cycle found kept
+        assert await _store(sessions, [cycle_event("a", SUCCEEDED, "DONE", success=True)]) == ["a"]
+        row = (await _rows(sessions))["a"]
+        assert (row.outcome, row.success, row.stage_reached) == (PickState.SUCCEEDED, True, "DONE")
+        assert row.timestamp == started_at and row.object_class == "rod" and row.cycle_time == 9.5
+        # late or repeated records change nothing: a running one, an "interrupted" sent again, a duplicate
+        late = [
+            cycle_event("a", RUNNING, "PLACE"),
+            cycle_event("a", INTERRUPTED, "PLACE"),
+            cycle_event("a", SUCCEEDED, "DONE", success=True),
+        ]
+        assert await _store(sessions, late) == []
+        assert (await _rows(sessions))["a"].stage_reached == "DONE"
+        # one batch with a whole cycle in it: the outcome wins over the records before it
+        batch = [
+            cycle_event("b", RUNNING, "INIT"),
+            cycle_event("b", RUNNING, "LIFT"),
+            cycle_event("b", FAILED, "LIFT"),
+        ]
+        assert await _store(sessions, batch) == ["b"]
+        row = (await _rows(sessions))["b"]
+        assert (
+            row.outcome == PickState.FAILED
+            and row.error_code == "ControllerError"
+            and row.object_class == "rod"
+        )
+        # a crash-cut cycle the task reports when it comes back: interrupted at the stage it reached
+        await _store(sessions, [cycle_event("c", RUNNING, "INIT"), cycle_event("c", RUNNING, "REORIENT")])
+        cut = task_pb2.PickEvent(
+            pick_id="c",
+            robot_id="robot_01",
+            status=INTERRUPTED,
+            stage_reached="REORIENT",
+            failure_reason="REORIENT: interrupted: the task process ended",
+            error_code="CycleInterruptedError",
+        )
+        assert await _store(sessions, [cut]) == ["c"]
+        row = (await _rows(sessions))["c"]
+        assert (row.outcome, row.stage_reached, row.success) == (PickState.INTERRUPTED, "REORIENT", False)
+        assert row.object_class == "rod"  # not erased by the record that lacks it
+        async with sessions() as s:
+            summary = await PickRepository(s).summary(datetime.now(UTC))
+        assert (summary.total, summary.succeeded, summary.failed) == (3, 1, 2)
+    finally:
+        await engine.dispose()
+
+
+async def test_a_newer_cycle_of_the_robot_marks_its_older_running_rows_interrupted(
+    database: DatabaseSettings,
+):
+    await migrate_up(database)
+    engine = make_engine(database, database.url)
+    sessions = session_factory(engine)
+    try:
+        # a task that died in PLACE and came back without a journal: its next cycle's start says enough
+        await _store(sessions, [cycle_event("old", RUNNING, "INIT"), cycle_event("old", RUNNING, "PLACE")])
+        await _store(sessions, [cycle_event("other-robot", RUNNING, "GRASP", robot_id="robot_02")])
+        await _store(sessions, [cycle_event("new", RUNNING, "INIT")])
+        rows = await _rows(sessions)
+        assert rows["old"].outcome == PickState.INTERRUPTED and rows["old"].stage_reached == "PLACE"
+        assert rows["old"].error_code == "CycleInterruptedError"
+        assert (rows["old"].error_message or "").startswith("PLACE: interrupted")
+        assert rows["new"].outcome == PickState.RUNNING
+        assert rows["other-robot"].outcome == PickState.RUNNING  # another robot's cycle goes on
+        # the restarted task's own report comes later: the row is already final, nothing changes
+        assert await _store(sessions, [cycle_event("old", INTERRUPTED, "PLACE")]) == []
+    finally:
+        await engine.dispose()
+
+
+async def test_a_cycles_own_outcome_after_a_newer_cycles_start_replaces_the_concluded_interruption(
+    database: DatabaseSettings,
+):
+    # seen in the multi-process test: the next cycle's first record (keys.pick_progress) reached the
+    # gateway before the previous cycle's outcome (keys.pick_events); the success was stored as interrupted
+    await migrate_up(database)
+    engine = make_engine(database, database.url)
+    sessions = session_factory(engine)
+    try:
+        await _store(
+            sessions, [cycle_event("first", RUNNING, "INIT"), cycle_event("first", RUNNING, "PLACE")]
+        )
+        await _store(sessions, [cycle_event("second", RUNNING, "INIT")])
+        assert (await _rows(sessions))["first"].outcome == PickState.INTERRUPTED
+        assert await _store(sessions, [cycle_event("first", SUCCEEDED, "DONE", success=True)]) == ["first"]
+        row = (await _rows(sessions))["first"]
+        assert (row.outcome, row.success, row.stage_reached) == (PickState.SUCCEEDED, True, "DONE")
+        assert row.error_code is None and row.error_message is None
+        # and in one batch: the outcome wins over an interruption stored with it
+        batch = [cycle_event("second", INTERRUPTED, "LIFT"), cycle_event("second", FAILED, "LIFT")]
+        assert await _store(sessions, batch) == ["second"]
+        row = (await _rows(sessions))["second"]
+        assert (row.outcome, row.error_code) == (PickState.FAILED, "ControllerError")
+        # once the cycle's own outcome is stored, nothing replaces it
+        assert await _store(sessions, [cycle_event("first", FAILED, "DONE")]) == []
+        assert (await _rows(sessions))["first"].outcome == PickState.SUCCEEDED
+    finally:
+        await engine.dispose()
+
+
+async def test_the_outcome_migration_keeps_stored_picks_as_they_were(database: DatabaseSettings):
+    engine = make_engine(database, database.url)
+    try:
+        await migrate.upgrade(engine, database, "0001_initial")
+        async with engine.begin() as conn:
+            for i, ok in enumerate((True, False)):
+                await conn.execute(
+                    text(
+                        "INSERT INTO picks (pick_id, timestamp, robot_id, success) "
+                        f"VALUES ('p{i}', CURRENT_TIMESTAMP, 'robot_01', {'TRUE' if ok else 'FALSE'})"
+                    )
+                )
+        assert await migrate.upgrade(engine, database) == migrate.head_revision()
+        rows = await _rows(session_factory(engine))
+        assert {p: r.outcome for p, r in rows.items()} == {"p0": PickState.SUCCEEDED, "p1": PickState.FAILED}
+        assert await migrate.downgrade(engine, "0001_initial") == "0001_initial"
+    finally:
+        await engine.dispose()
+
+
+class WriterTime:
+    """The writer's clock and sleep, moved by the test: each backoff sleep waits until the test lets
+    it end, the clock then stands that much later. A minute of outage passes in as many retries."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+        self.sleeps: asyncio.Queue[tuple[float, asyncio.Future[None]]] = asyncio.Queue()
+
+    def clock(self) -> float:
+        return self.now
+
+    async def sleep(self, seconds: float) -> None:
+        done: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        self.sleeps.put_nowait((seconds, done))
+        await done
+
+    async def next_sleep(self, timeout_s: float = 30.0) -> asyncio.Future[None]:
+        """The writer's next backoff: the clock moves past it (the test then ends it)."""
+        seconds, done = await asyncio.wait_for(self.sleeps.get(), timeout_s)
+        self.now += seconds
+        return done
+
+
+def one_cycle(k: int) -> list[task_pb2.PickEvent]:
+    pick_id = f"outage-{k}"
+    return [
+        cycle_event(pick_id, RUNNING, "INIT"),
+        cycle_event(pick_id, RUNNING, "GRASP"),
+        cycle_event(
+            pick_id, SUCCEEDED if k % 2 == 0 else FAILED, "DONE" if k % 2 == 0 else "LIFT", success=k % 2 == 0
+        ),
+    ]
+
+
+@pytest.mark.integration
+@pytest.mark.postgres
+async def test_a_minute_without_the_database_loses_no_pick_of_the_cycles_run_meanwhile(tmp_path):
+    """PostgreSQL cut off (through a proxy) for over 60 s of the writer's clock, six cycles started and
+    ended during it (one started before): every cycle has its row with its outcome, none twice."""
+    async with postgres_behind_proxy() as (direct, via_proxy, proxy):
+        engine = make_engine(via_proxy, via_proxy.url)
+        sessions = session_factory(engine)
+
+        async def insert(events: Sequence[task_pb2.PickEvent]) -> list[tuple[int, str]]:
+            async with sessions() as s:
+                done = await insert_picks(s, [pick_row(ev, "robot_01") for ev in events])
+                await s.commit()
+            return done
+
+        t = WriterTime()
+        reported: list[str] = []
+        writer = PickWriter(
+            PickBuffer(4, tmp_path / "spill.jsonl"),  # a small memory bound: the outage spills to disk
+            insert,
+            batch_size=3,
+            retry_initial_s=0.2,
+            retry_max_s=5.0,
+            on_written=lambda ps: reported.extend(p.event.pick_id for p in ps),
+            clock=t.clock,
+            sleep=t.sleep,
+        )
+        run = asyncio.create_task(writer.run())
+        try:
+            before = one_cycle(0)
+            writer.offer(before[0])  # started while the database was there
+            await writer.drained(15.0)
+            await proxy.cut()
+            for ev in before[1:]:
+                writer.offer(ev)
+            cycles = [before]
+            spilled = 0
+            while writer.database_ok or writer.outage_s() < 65.0:
+                done = await t.next_sleep()  # a retry failed; the writer waits out its backoff
+                if len(cycles) < 7 and t.now >= 8.0 * len(cycles):  # a cycle every 8 s of the outage
+                    cycles.append(one_cycle(len(cycles)))
+                    for ev in cycles[-1]:
+                        writer.offer(ev)
+                spilled = max(spilled, writer.buffer.spilled)
+                done.set_result(None)
+            assert not writer.database_ok and len(cycles) == 7 and reported == []
+            assert len(writer.buffer) == 3 * 7 - 1 and spilled > 0
+            await proxy.start()
+            async with asyncio.timeout(60.0):
+                while not writer.database_ok:  # its retries go on until one gets through
+                    if t.sleeps.empty():
+                        await asyncio.sleep(0.01)
+                    else:
+                        (await t.next_sleep()).set_result(None)
+            await writer.drained(30.0)
+        finally:
+            run.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await run
+            await engine.dispose()
+        assert writer.longest_outage_s >= 60.0
+
+        engine = make_engine(direct, PG_URL)
+        try:
+            rows = await _rows(session_factory(engine))
+        finally:
+            await engine.dispose()
+    expected = {c[-1].pick_id: c[-1].status for c in cycles}
+    stored = {p: r.outcome for p, r in rows.items()}
+    assert stored == {
+        p: PickState.SUCCEEDED if s == SUCCEEDED else PickState.FAILED for p, s in expected.items()
+    }
+    assert sorted(reported) == sorted(expected)  # each finished pick reported once

@@ -73,6 +73,13 @@ async def test_status_requests_query_nothing(settings, sqlite_db, tmp_path) -> N
                 r = await gw.client.get("/api/v1/system/status")
                 assert r.status_code == 200 and r.headers["content-type"] == "application/json"
                 assert r.headers["x-content-type-options"] == "nosniff"
+            assert r.headers["cache-control"] == "no-store"
+            head = await gw.client.head("/api/v1/system/status")
+            assert head.status_code == 200 and head.content == b""
+            # with an Origin header it goes through the middleware (CORS) and the route: the same answer
+            routed = await gw.client.get("/api/v1/system/status", headers={"Origin": "http://127.0.0.1"})
+            assert routed.status_code == 200 and routed.json()["state"] == r.json()["state"]
+            assert routed.headers["x-content-type-options"] == "nosniff"
             assert queries == [], queries[:3]
             body = r.json()
             assert body["picks_today"] == 0 and body["database"] == "ok"
@@ -90,3 +97,23 @@ async def test_status_requests_query_nothing(settings, sqlite_db, tmp_path) -> N
 
 
 pytestmark = pytest.mark.integration
+
+
+def test_the_counts_are_read_again_at_midnight_utc() -> None:
+    from datetime import UTC, datetime
+
+    from gateway.app import seconds_to_midnight_utc
+
+    assert seconds_to_midnight_utc(datetime(2026, 12, 1, 23, 59, 59, tzinfo=UTC)) == 1.5
+    assert seconds_to_midnight_utc(datetime(2026, 12, 31, 0, 0, 0, tzinfo=UTC)) == 86_400.5
+
+
+def test_a_message_is_serialised_once_for_every_dashboard() -> None:
+    from pickplace.v1 import robot_pb2
+
+    hub = LiveHub()
+    with hub.connection() as a, hub.connection() as b:
+        assert a.get_nowait() == b.get_nowait() == '{"type":"timeline","data":[]}'  # nothing happened yet
+        hub.on_robot_status(robot_pb2.RobotStatus(connected=True, robot_mode=5), asked_at=1.0)
+        ta, tb = a.get_nowait(), b.get_nowait()
+    assert ta is tb and '"robot_mode":5' in ta

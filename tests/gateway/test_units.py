@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import json
 import math
 
 import pytest
@@ -189,7 +190,7 @@ def test_hub_slow_client_keeps_newest():
         for k in range(1, CLIENT_QUEUE + 20):
             hub.on_joint_state(_js(k * 10_000_000))
         assert q.qsize() == CLIENT_QUEUE
-        items = [q.get_nowait() for _ in range(q.qsize())]
+        items = [json.loads(q.get_nowait()) for _ in range(q.qsize())]
     assert items[-1]["data"]["stamp_ns"] == (CLIENT_QUEUE + 19) * 10_000_000
     assert hub.connections == 0
 
@@ -279,3 +280,63 @@ def test_metrics_multiprocess_mode_aggregates_every_process(tmp_path):
     ).stdout
     assert 'pick_success_total{object_class="rod",robot_id="robot_01"} 2.0' in out
     assert 'cycle_time_seconds_count{robot_id="robot_01"} 2.0' in out
+
+
+def test_hub_keeps_the_current_cycles_plans_and_starts_afresh_with_the_next():
+    from pickplace.v1 import common_pb2, task_pb2
+
+    from gateway.live import PLANS_KEPT
+
+    def plan(cycle: int, seq: int) -> task_pb2.TaskPlan:
+        p = task_pb2.TaskPlan(cycle_index=cycle, label=f"move{seq}")
+        p.header.seq = seq
+        p.tool_path.extend([common_pb2.Point(x=0.4, y=0.0, z=0.1 * k) for k in range(3)])
+        return p
+
+    hub = LiveHub()
+    changes: list[str] = []
+    hub.on_change = changes.append
+    with hub.connection() as q:
+        assert json.loads(q.get_nowait())["type"] == "timeline"
+        hub.on_plan(plan(1, 1))
+        hub.on_plan(plan(1, 2))
+        sent = json.loads(q.get_nowait()), json.loads(q.get_nowait())
+    assert [m["type"] for m in sent] == ["plan", "plan"]
+    assert [p["label"] for p in sent[-1]["data"]["plans"]] == ["move1", "move2"]
+    assert sent[-1]["data"]["plans"][0]["path"][2] == [0.4, 0.0, 0.2]
+    assert changes == []  # a plan does not touch the status snapshot
+    hub.on_plan(plan(2, 3))
+    assert hub.plan is not None and hub.plan["cycle_index"] == 2 and len(hub.plan["plans"]) == 1
+    for k in range(PLANS_KEPT + 5):
+        hub.on_plan(plan(2, 10 + k))
+    assert len(hub.plan["plans"]) == PLANS_KEPT and hub.plan["plans"][-1]["seq"] == 10 + PLANS_KEPT + 4
+    assert {"type": "plan", "data": hub.plan} in hub.snapshot()  # a dashboard connecting later sees them
+
+
+def test_hub_timeline_keeps_what_happened_for_a_dashboard_that_connects_later():
+    from pickplace.v1 import task_pb2
+
+    hub = LiveHub()
+    for state in ("DETECT", "DETECT", "PLAN", "PLAN", "ESTOP"):  # the task reports at 2 Hz
+        hub.on_task_status(task_pb2.TaskStatus(state=state))
+    hub.on_robot_status(robot_pb2.RobotStatus(connected=True, estop_active=True, alarms=[116]), asked_at=1.0)
+    hub.on_event("estop", {"message": "e-stop pressed"})
+    hub.on_picks([{"id": 1, "success": True}, {"id": 2, "success": False, "error_code": "GraspFailureError"}])
+    hub.on_joint_state(_js(10_000_000))  # not an event
+    with hub.connection() as q:
+        first = json.loads(q.get_nowait())
+    assert first["type"] == "timeline"
+    kinds = [
+        (m["type"], m["data"].get("state") if m["type"] == "task_status" else None) for m in first["data"]
+    ]
+    assert kinds == [
+        ("task_status", "DETECT"),
+        ("task_status", "PLAN"),
+        ("task_status", "ESTOP"),
+        ("robot_status", None),
+        ("estop", None),
+        ("picks", None),
+    ]
+    assert [p["id"] for p in first["data"][-1]["data"]] == [2]  # the failed pick only
+    stamps = [m["at_ms"] for m in first["data"]]
+    assert stamps == sorted(stamps) and stamps[0] > 1.7e12  # wall time in ms, in order

@@ -53,35 +53,71 @@ async function api(path, { method = "GET", body } = {}) {
 
 // ---------------------------------------------------------------- events timeline
 const events = [];
-function addEvent(text, cls = "idle", at = Date.now()) {
-  events.unshift({ at, text, cls });
+// local: this page's own (commands, its link), kept when the gateway's timeline is replayed
+function addEvent(text, cls = "idle", at = Date.now(), local = true) {
+  events.unshift({ at, text, cls, local });
   if (events.length > 200) events.pop();
+  renderEvents();
+}
+function renderEvents() {
   $("events").innerHTML = events.map((e) =>
     `<li class="${e.cls}"><time>${clock(e.at)}</time><span>${escapeHtml(e.text)}</span></li>`).join("");
 }
 
 let lastTaskState = null, lastMode = null, lastAlarms = new Set(), lastEstop = null;
-function noteTask(t) {
+function noteTask(t, at) {
   if (!t || t.state === lastTaskState) return;
   lastTaskState = t.state;
   const why = t.message ? ` — ${t.message}` : "";
-  addEvent(`task ${t.state}${why}`, stateClass(t.state) === "ok" ? "idle" : stateClass(t.state));
+  addEvent(`task ${t.state}${why}`, stateClass(t.state) === "ok" ? "idle" : stateClass(t.state), at, false);
 }
-function noteRobot(r) {
+function noteRobot(r, at) {
   if (!r) return;
+  const add = (text, cls) => addEvent(text, cls, at, false);
   if (r.connected && r.robot_mode_name && r.robot_mode_name !== lastMode) {
-    if (lastMode !== null) addEvent(`robot mode ${lastMode} → ${r.robot_mode_name}`, stateClass(r.robot_mode_name));
+    if (lastMode !== null) add(`robot mode ${lastMode} → ${r.robot_mode_name}`, stateClass(r.robot_mode_name));
     lastMode = r.robot_mode_name;
   }
   if (r.estop_active !== lastEstop) {
-    if (r.estop_active) addEvent("E-STOP active on the robot", "estop");
-    else if (lastEstop) addEvent("e-stop released", "ok");
+    if (r.estop_active) add("E-STOP active on the robot", "estop");
+    else if (lastEstop) add("e-stop released", "ok");
     lastEstop = r.estop_active;
   }
   const now = new Set(r.alarms || []);
-  for (const id of now) if (!lastAlarms.has(id)) addEvent(`alarm ${id}: ${describeAlarm(id)}`, "bad");
-  for (const id of lastAlarms) if (!now.has(id)) addEvent(`alarm ${id} cleared`, "ok");
+  for (const id of now) if (!lastAlarms.has(id)) add(`alarm ${id}: ${describeAlarm(id)}`, "bad");
+  for (const id of lastAlarms) if (!now.has(id)) add(`alarm ${id} cleared`, "ok");
   lastAlarms = now;
+}
+// what a live message adds to the timeline; the gateway's timeline (sent first on connecting) replays
+// the same messages with the time they happened, so a page opened later shows what went before
+function noteMessage(msg, at = Date.now()) {
+  const d = msg.data;
+  switch (msg.type) {
+    case "robot_status": noteRobot(d, at); break;
+    case "task_status": noteTask(d, at); break;
+    case "picks":
+      for (const p of d) {
+        if (p.success) continue; // the task's message often names the stage itself: said once
+        const why = (p.error_message || p.error_code || "?").replace(new RegExp(`^${p.stage_reached}: `), "");
+        addEvent(`pick #${p.id} failed at ${p.stage_reached}: ${why}`, "bad", at, false);
+      }
+      break;
+    case "estop": addEvent(`E-STOP pressed: ${d.message}`, "estop", at, false); break;
+    case "estop_task": addEvent(`e-stop: ${d.message}`, "warn", at, false); break;
+    case "config": if (d.updated && d.updated.length) addEvent(`settings changed: ${d.updated.join(", ")}`, "idle", at, false); break;
+    default: break;
+  }
+}
+function replayTimeline(entries) {
+  const local = events.filter((e) => e.local);
+  events.length = 0;
+  lastTaskState = null; lastMode = null; lastAlarms = new Set(); lastEstop = null;
+  for (const m of entries) noteMessage(m, m.at_ms);
+  events.push(...local);
+  events.sort((a, b) => b.at - a.at);
+  events.splice(200);
+  renderEvents();
+  $("events").dataset.replayed = String(entries.length);
 }
 
 // ---------------------------------------------------------------- render: one source of truth
@@ -218,7 +254,7 @@ async function loadHistory(highlight = new Set()) {
     $("history-rows").innerHTML = data.map((p) => {
       const cls = (p.success ? "ok" : "fail") + (highlight.has(p.pick_id) ? " new" : "");
       const t = new Date(p.timestamp).toLocaleTimeString([], { hour12: false });
-      const r = p.success ? "success" : (p.error_code || "failed");
+      const r = p.success ? "success" : p.outcome === "interrupted" ? "interrupted" : (p.error_code || "failed");
       return `<tr class="${cls}" title="${escapeHtml(p.error_message || "")}"><td>${p.id}</td><td>${t}</td>` +
              `<td>${escapeHtml(p.object_class || "—")}</td><td>${escapeHtml(r)}</td>` +
              `<td>${p.cycle_time == null ? "—" : p.cycle_time.toFixed(2)}</td><td>${escapeHtml(p.stage_reached || "")}</td></tr>`;
@@ -273,20 +309,20 @@ function connectLive() {
     const msg = JSON.parse(ev.data);
     switch (msg.type) {
       case "joint_state": applyJoints(msg.data); return;
-      case "robot_status": model.robot = msg.data; model.robotAt = performance.now(); noteRobot(msg.data); break;
-      case "task_status": model.task = msg.data; model.taskAt = performance.now(); noteTask(msg.data); break;
+      case "timeline": replayTimeline(msg.data); return;
+      case "robot_status": model.robot = msg.data; model.robotAt = performance.now(); noteMessage(msg); break;
+      case "task_status": model.task = msg.data; model.taskAt = performance.now(); noteMessage(msg); break;
       case "picks":
         page = 0;
-        for (const p of msg.data) {
-          if (!p.success) addEvent(`pick #${p.id} failed at ${p.stage_reached}: ${p.error_message || p.error_code || "?"}`, "bad");
-        }
+        noteMessage(msg);
         loadHistory(new Set(msg.data.map((p) => p.pick_id))); loadStats(); loadRecent();
         break;
-      case "camera": camSeq = msg.data.seq; refreshCamera(); return;
+      case "camera": camSeq = msg.data.seq; refreshCamera(); loadCameraInfo(); return;
+      case "plan": model.plan = msg.data; if (robotView) robotView.setPlan(msg.data); return;
       case "detections": applyDetections(msg.data); return;
-      case "estop": addEvent(`E-STOP pressed: ${msg.data.message}`, "estop"); notice(`E-stop: ${msg.data.message}`); break;
-      case "estop_task": addEvent(`e-stop: ${msg.data.message}`, "warn"); break;
-      case "config": if (msg.data.updated && msg.data.updated.length) addEvent(`settings changed: ${msg.data.updated.join(", ")}`, "idle"); loadConfig(); break;
+      case "estop": noteMessage(msg); notice(`E-stop: ${msg.data.message}`); break;
+      case "estop_task": noteMessage(msg); break;
+      case "config": noteMessage(msg); loadConfig(); break;
       default: return;
     }
     render();
@@ -305,6 +341,21 @@ async function command(path, body, okText) {
     else { notice(err.message); addEvent(`refused: ${err.message}`, "warn"); }
   }
   loadStatus();
+}
+
+// the camera's pinhole and calibrated pose, for the 3D view's frustum: once, asked again every 2 s
+// until the camera has sent a frame
+let cameraInfo = null, cameraInfoPending = false;
+async function loadCameraInfo() {
+  if (cameraInfo || !robotView || cameraInfoPending) return;
+  cameraInfoPending = true;
+  try {
+    ({ data: cameraInfo } = await api("/camera/info"));
+    robotView.setCamera(cameraInfo);
+    cameraInfoPending = false;
+  } catch {
+    setTimeout(() => { cameraInfoPending = false; loadCameraInfo(); }, 2000);
+  }
 }
 
 async function loadConfig() {
@@ -363,6 +414,8 @@ async function main() {
   if (robotView) {
     robotView.setTargets(placeTargets);
     if (model.detections) robotView.setDetections(model.detections);
+    if (model.plan) robotView.setPlan(model.plan);
+    loadCameraInfo();
   }
 }
 

@@ -113,18 +113,30 @@ export function drawStageBars(canvas, details) {
   ctx.fillStyle = LABEL;
   const rows = details.filter((d) => d.stage_durations && Object.keys(d.stage_durations).length);
   if (!rows.length) { ctx.fillText("no stage times yet", 10, h / 2); return 0; }
-  const left = 48, bottom = 18, legend = 16;
+  const left = 48, bottom = 18;
+  // the legend first: the stages in the order they come, wrapped to as many lines as the width needs
+  const stages = [...new Set(rows.flatMap((d) => Object.keys(d.stage_durations)))];
+  const keys = [];
+  let lx = left, ly = 12;
+  for (const stage of stages) {
+    const wd = ctx.measureText(stage.toLowerCase()).width + 24;
+    if (lx + wd > w && lx > left) { lx = left; ly += 14; }
+    keys.push([stage, lx, ly]);
+    lx += wd;
+  }
+  const legend = ly + 4;
   const total = (d) => Object.values(d.stage_durations).reduce((a, b) => a + b, 0);
   const tmax = Math.max(...rows.map(total)) * 1.05;
-  const bh = Math.min(18, (h - bottom - legend - 4) / rows.length - 3);
+  const bh = Math.max(2, Math.min(18, (h - bottom - legend - 4) / rows.length - 3));
   const x = (s) => left + (s / tmax) * (w - left - 8);
   ctx.strokeStyle = AXIS;
   for (let k = 0; k <= 4; k++) {
     const s = (k / 4) * tmax;
     ctx.beginPath(); ctx.moveTo(x(s), legend); ctx.lineTo(x(s), h - bottom); ctx.stroke();
-    ctx.fillText(`${s.toFixed(1)} s`, x(s) - 12, h - 4);
+    ctx.textAlign = k === 4 ? "right" : "center";
+    ctx.fillText(`${s.toFixed(1)} s`, k === 4 ? w - 2 : x(s), h - 4);
   }
-  const seen = new Set();
+  ctx.textAlign = "left";
   rows.forEach((d, i) => {
     const top = legend + 4 + i * (bh + 3);
     ctx.fillStyle = LABEL; ctx.fillText(`#${d.id}`, 2, top + bh - 4);
@@ -132,14 +144,12 @@ export function drawStageBars(canvas, details) {
     for (const [stage, dt] of Object.entries(d.stage_durations)) {
       ctx.fillStyle = STAGE_COLORS[stage] || "#6e7681";
       ctx.fillRect(x(s), top, Math.max(1, x(s + dt) - x(s)), bh);
-      s += dt; seen.add(stage);
+      s += dt;
     }
   });
-  let lx = left;
-  for (const stage of seen) {
-    ctx.fillStyle = STAGE_COLORS[stage] || "#6e7681"; ctx.fillRect(lx, 3, 9, 9);
-    ctx.fillStyle = LABEL; ctx.fillText(stage.toLowerCase(), lx + 12, 12);
-    lx += ctx.measureText(stage).width + 24;
+  for (const [stage, kx, ky] of keys) {
+    ctx.fillStyle = STAGE_COLORS[stage] || "#6e7681"; ctx.fillRect(kx, ky - 9, 9, 9);
+    ctx.fillStyle = LABEL; ctx.fillText(stage.toLowerCase(), kx + 12, ky);
   }
   return rows.length;
 }

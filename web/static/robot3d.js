@@ -29,7 +29,7 @@ export async function createRobotView(container, urdfUrl) {
   const scene = new THREE.Scene();
   scene.background = new THREE.Color(0x0b0e12);
   const camera = new THREE.PerspectiveCamera(45, w / h, 0.01, 20);
-  camera.position.set(1.25, 0.75, 1.0);
+  camera.position.set(1.55, 1.05, 1.45); // the arm, the table and the camera on its mount in view
   scene.add(new THREE.HemisphereLight(0xffffff, 0x334455, 1.6));
   const sun = new THREE.DirectionalLight(0xffffff, 1.8);
   sun.position.set(2, 4, 3);
@@ -42,7 +42,7 @@ export async function createRobotView(container, urdfUrl) {
   scene.add(world);
 
   const controls = new OrbitControls(camera, renderer.domElement);
-  controls.target.set(0.1, 0.3, 0.0);
+  controls.target.set(0.35, 0.2, 0.0);
   controls.update();
 
   let text;
@@ -72,6 +72,14 @@ export async function createRobotView(container, urdfUrl) {
     requestAnimationFrame(render);
   };
   requestAnimationFrame(render);
+  new ResizeObserver(() => { // the panel follows the window (1280–1920 px and beyond)
+    const cw = container.clientWidth, ch = container.clientHeight;
+    if (!cw || !ch) return;
+    renderer.setSize(cw, ch);
+    camera.aspect = cw / ch;
+    camera.updateProjectionMatrix();
+    dirty = true;
+  }).observe(container);
   container.dataset.loaded = "true";
 
   // what vision sees (base frame, as the detection list): the table, rods, cubes, obstacle boxes;
@@ -81,7 +89,8 @@ export async function createRobotView(container, urdfUrl) {
   table.position.set(0.5, 0.0, -0.001);
   world.add(table);
   const objects = new THREE.Group(), targets = new THREE.Group();
-  world.add(objects, targets);
+  const frustum = new THREE.Group(), plans = new THREE.Group();
+  world.add(objects, targets, frustum, plans);
   const COLOR = { red: 0xe5534b, green: 0x3fb950, blue: 0x4493f8, yellow: 0xe3b341, black: 0x222222 };
   const clear = (g) => { while (g.children.length) { const c = g.children.pop(); c.geometry?.dispose(); } };
   const up = new THREE.Vector3(0, 1, 0);
@@ -117,6 +126,61 @@ export async function createRobotView(container, urdfUrl) {
       }
       shown = objects.children.length;
       container.dataset.objects = String(shown);
+      dirty = true;
+    },
+    // the camera: its body at the calibrated pose and the four corner rays of its image down to the
+    // table plane (z = 0; at most 2 m out), the footprint it sees on the table outlined
+    setCamera(info) {
+      clear(frustum);
+      const T = info.T_base_camera;
+      if (!T) { container.dataset.frustum = "no pose"; dirty = true; return; }
+      const rot = (d) => new THREE.Vector3(
+        T[0][0] * d[0] + T[0][1] * d[1] + T[0][2] * d[2],
+        T[1][0] * d[0] + T[1][1] * d[1] + T[1][2] * d[2],
+        T[2][0] * d[0] + T[2][1] * d[1] + T[2][2] * d[2]);
+      const eye = new THREE.Vector3(T[0][3], T[1][3], T[2][3]);
+      const corners = [[0, 0], [info.width, 0], [info.width, info.height], [0, info.height]].map(([u, v]) => {
+        const ray = rot([(u - info.cx) / info.fx, (v - info.cy) / info.fy, 1]).normalize();
+        const reach = ray.z < -1e-6 ? Math.min(-eye.z / ray.z, 2.0) : 2.0;
+        return eye.clone().addScaledVector(ray, reach);
+      });
+      const pts = [];
+      corners.forEach((c, k) => pts.push(eye, c, c, corners[(k + 1) % 4]));
+      frustum.add(new THREE.LineSegments(new THREE.BufferGeometry().setFromPoints(pts),
+        new THREE.LineBasicMaterial({ color: 0x58a6ff })));
+      const footprint = new THREE.Mesh(new THREE.BufferGeometry().setFromPoints([corners[0], corners[1], corners[2], corners[0], corners[2], corners[3]]),
+        new THREE.MeshBasicMaterial({ color: 0x58a6ff, transparent: true, opacity: 0.08, side: THREE.DoubleSide }));
+      frustum.add(footprint);
+      const body = new THREE.Mesh(new THREE.BoxGeometry(0.09, 0.025, 0.03),
+        new THREE.MeshStandardMaterial({ color: 0x58a6ff, roughness: 0.5 }));
+      body.position.copy(eye);
+      body.quaternion.setFromRotationMatrix(new THREE.Matrix4().set(
+        T[0][0], T[0][1], T[0][2], 0, T[1][0], T[1][1], T[1][2], 0, T[2][0], T[2][1], T[2][2], 0, 0, 0, 0, 1));
+      frustum.add(body);
+      container.dataset.frustum = "true";
+      dirty = true;
+    },
+    // the current cycle's planned path: the tool tip through each plan the task got, one line per plan
+    // (the first in the path colour, later ones lighter), a dot where each plan ends
+    setPlan(plan) {
+      clear(plans);
+      let points = 0;
+      (plan.plans || []).forEach((p, k) => {
+        if (!p.path || p.path.length < 2) return;
+        const v = p.path.map((q) => new THREE.Vector3(...q));
+        const color = k === plan.plans.length - 1 ? 0xf0883e : 0xd2a8ff;
+        // a thin tube, not a line: WebGL draws lines 1 px wide whatever their width
+        const curve = new THREE.CatmullRomCurve3(v, false, "centripetal");
+        plans.add(new THREE.Mesh(new THREE.TubeGeometry(curve, Math.min(4 * v.length, 400), 0.003, 6, false),
+          new THREE.MeshBasicMaterial({ color })));
+        const end = new THREE.Mesh(new THREE.SphereGeometry(0.008, 12, 8), new THREE.MeshBasicMaterial({ color }));
+        end.position.copy(v[v.length - 1]);
+        plans.add(end);
+        points += v.length;
+      });
+      container.dataset.planPoints = String(points);
+      container.dataset.planCycle = String(plan.cycle_index ?? "");
+      container.dataset.planSource = plan.source || "";
       dirty = true;
     },
     setTargets(points) { // [[x, y, colour]] on the table

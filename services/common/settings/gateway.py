@@ -25,7 +25,11 @@ class GatewaySettings(Model):
         0.1, gt=0, le=10, description="GET /system/status snapshot: rebuilt at least this often"
     )
     status_db_period_s: float = Field(
-        1.0, gt=0, le=60, description="how often the status snapshot reads today's picks"
+        30.0,
+        gt=0,
+        le=600,
+        description="how often the status snapshot re-reads today's picks besides after each write "
+        "(each read holds the gateway's event loop for some ms)",
     )
     robot_id: str = Field("robot_01", pattern=r"^[A-Za-z0-9_\-]{1,50}$")
     pick_buffer_size: int = Field(
