@@ -39,16 +39,19 @@ class Topic(enum.StrEnum):
     VISION_OBJECTS = "/vision/objects"
     PLAN = "/plan"
     PLANNING_SCENE = "/planning_scene"
+    TASK_PLANS = "/task/plans"
     TASK_STATUS = "/task/status"
     PICK_EVENTS = "/pick_events"
     ROBOT_STATUS = "/robot/status"
     LOG = "/log"
     ROBOT_DESCRIPTION = "/robot_description"
+    ROS2_JOINT_STATES = "/ros2/joint_states"  # the joint states as sensor_msgs/msg/JointState (record.ros2)
 
 
 class Encoding(enum.StrEnum):
     PROTOBUF = "protobuf"
     JSON = "json"
+    CDR = "cdr"  # ROS 2's serialisation, with a "ros2msg" schema
 
 
 @dataclass(frozen=True)
@@ -58,7 +61,7 @@ class ChannelSpec:
     topic: Topic
     message_encoding: Encoding
     schema_name: str
-    schema_encoding: str  # "protobuf" (a FileDescriptorSet) | "jsonschema"
+    schema_encoding: str  # "protobuf" (a FileDescriptorSet) | "jsonschema" | "ros2msg"
     schema_data: bytes
     what: str
 
@@ -102,6 +105,22 @@ ROBOT_STATUS_SCHEMA: dict[str, Any] = {
         },
     },
 }
+# sensor_msgs/msg/JointState with the definitions it uses, concatenated as ROS 2 bags store them (ros2msg)
+ROS2_JOINT_STATE = "sensor_msgs/msg/JointState"
+ROS2_JOINT_STATE_MSGDEF = """std_msgs/Header header
+string[] name
+float64[] position
+float64[] velocity
+float64[] effort
+================================================================================
+MSG: std_msgs/Header
+builtin_interfaces/Time stamp
+string frame_id
+================================================================================
+MSG: builtin_interfaces/Time
+int32 sec
+uint32 nanosec
+"""
 STRING_SCHEMA: dict[str, Any] = {
     "title": "std_msgs/String",
     "type": "object",
@@ -143,11 +162,20 @@ def channel_specs() -> dict[Topic, ChannelSpec]:
         _proto(Topic.VISION_OBJECTS, vision_pb2.DetectedObjects, "vision's DetectedObjects as published"),
         _foxglove(Topic.PLAN, SceneUpdate, "the planned tool path of the current cycle, as a line"),
         _foxglove(Topic.PLANNING_SCENE, SceneUpdate, "the collision boxes and table motion planned around"),
+        _proto(Topic.TASK_PLANS, task_pb2.TaskPlan, "the task's plans as published: tool path and boxes"),
         _proto(Topic.TASK_STATUS, task_pb2.TaskStatus, "cycle state on every change and at 2 Hz"),
         _proto(Topic.PICK_EVENTS, task_pb2.PickEvent, "one per pick attempt"),
         _json(Topic.ROBOT_STATUS, ROBOT_STATUS_SCHEMA, "mode, e-stop, alarms with their meanings"),
         _foxglove(Topic.LOG, Log, "the Python logging of every service in the process"),
         _json(Topic.ROBOT_DESCRIPTION, STRING_SCHEMA, "the robot's URDF (with visuals) for the 3D panel"),
+        ChannelSpec(
+            Topic.ROS2_JOINT_STATES,
+            Encoding.CDR,
+            ROS2_JOINT_STATE,
+            "ros2msg",
+            ROS2_JOINT_STATE_MSGDEF.encode(),
+            "the joint states for ROS 2 tools (record.ros2_joint_states)",
+        ),
     ]
     return {s.topic: s for s in specs}
 

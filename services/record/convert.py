@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import json
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cache
+from typing import Any
 
 import cv2
 import numpy as np
@@ -34,6 +37,7 @@ from services.dobot.codes import RobotMode, describe_alarm
 from services.kinematics.robot_models import RobotSpec
 from services.kinematics.tool import ToolGeometry
 from services.kinematics.urdf import arm_joints, flange_link, link_names
+from services.record.channels import ROS2_JOINT_STATE, ROS2_JOINT_STATE_MSGDEF
 
 Array = np.ndarray
 BASE_FRAME = "base"  # the frame of every base-frame pose on the bus (detections, tool pose)
@@ -190,6 +194,28 @@ def depth_raw(depth_u16: Array, stamp_ns: int, frame_id: str) -> bytes:
         step=2 * w,
         data=d.tobytes(),
     ).encode()
+
+
+@cache
+def _ros2_joint_state_encoder() -> Callable[[Any], bytes]:
+    from mcap_ros2._dynamic import serialize_dynamic  # mcap-ros2-support's CDR encoder (its own writer's)
+
+    return serialize_dynamic(ROS2_JOINT_STATE, ROS2_JOINT_STATE_MSGDEF)[ROS2_JOINT_STATE]
+
+
+def ros2_joint_state(js: common_pb2.JointState) -> bytes:
+    """A joint state as ROS 2 ``sensor_msgs/msg/JointState`` (CDR), stamped with its controller time when it
+    has one; effort from the measured joint torques when the controller reports them."""
+    sec, nsec = divmod(max(int(js.source_stamp_ns or js.header.stamp_ns), 0), 1_000_000_000)
+    return _ros2_joint_state_encoder()(
+        {
+            "header": {"stamp": {"sec": sec, "nanosec": nsec}, "frame_id": js.header.frame_id},
+            "name": list(js.name),
+            "position": list(js.position),
+            "velocity": list(js.velocity),
+            "effort": list(js.effort),
+        }
+    )
 
 
 def camera_calibration(intr: CameraIntrinsics, stamp_ns: int, frame_id: str) -> bytes:

@@ -3,8 +3,9 @@
 A thin shell around :mod:`~services.record.convert` (messages → Foxglove payloads) and
 :mod:`~services.record.writer` (MCAP files). Sources:
 
-- the bus: joint states, detections, task status, pick events, robot status and camera frames (the
-  frame stream of the multi-process cell, ``CellKeys.camera_frames``);
+- the bus: joint states, detections, task status, pick events, the task's plans (tool path and planning
+  scene), robot status and camera frames (the frame stream of the multi-process cell,
+  ``CellKeys.camera_frames``);
 - :meth:`RecordService.offer_frame`: the frames vision detected on, handed over in-process by the
   composition root (``pickplace up``, where the twin camera is not on the bus), with the calibration
   vision used;
@@ -35,7 +36,7 @@ from typing import Any
 import foxglove
 import numpy as np
 from foxglove.websocket import ChannelView, Client, ServerListener
-from pickplace.v1 import common_pb2, motion_pb2, robot_pb2, vision_pb2
+from pickplace.v1 import common_pb2, robot_pb2, task_pb2, vision_pb2
 
 from services.common.bus import Bus
 from services.common.errors import ConfigurationError
@@ -43,7 +44,6 @@ from services.common.keys import CellKeys
 from services.common.sensors import RGBDFrame, msg_to_frame
 from services.common.settings import Settings
 from services.common.shell import ServiceShell
-from services.kinematics.analytic import fk
 from services.kinematics.robot_models import get_robot
 from services.kinematics.tool import tool_geometry
 from services.kinematics.urdf import robot_urdf
@@ -227,6 +227,7 @@ class RecordService(ServiceShell):
             self.keys.detected_objects: Kind.DETECTIONS,
             self.keys.task_status: Kind.TASK_STATUS,
             self.keys.pick_events: Kind.PICK,
+            self.keys.task_plans: Kind.PLAN,
             self.keys.robot_status: Kind.ROBOT_STATUS,
             self.keys.camera_frames: Kind.BUS_FRAME,
         }
@@ -271,10 +272,6 @@ class RecordService(ServiceShell):
             self._queue.put(item)
         else:
             self._put(item)
-
-    def offer_plan(self, q_path: np.ndarray, boxes: list[motion_pb2.CollisionBox], label: str = "") -> None:
-        """A plan the task received (joint knots, (n, 6)) and the boxes it asked motion to avoid."""
-        self._put(Item(Kind.PLAN, time.time_ns(), (np.asarray(q_path, dtype=float), list(boxes), label)))
 
     @property
     def frames_waiting(self) -> int:
@@ -380,12 +377,15 @@ class RecordService(ServiceShell):
             stamp, levelno, name, msg, path, line = item.payload
             self._emit(Topic.LOG, convert.log_message(stamp, levelno, name, msg, path, line), t)
         elif k is Kind.PLAN:
-            q_path, boxes, label = item.payload
+            self._emit(Topic.TASK_PLANS, item.payload, t)
+            plan = task_pb2.TaskPlan.FromString(item.payload)
             m = self.settings.motion
-            self._emit(Topic.PLANNING_SCENE, scene.planning_scene(boxes, m.table_z_m, m.padding_m, t), t)
-            if len(q_path):
-                xyz = fk(self.spec, q_path, self.tool.T_flange_tool())[:, :3, 3]
-                self._emit(Topic.PLAN, scene.plan_line(xyz, t, label), t)
+            self._emit(
+                Topic.PLANNING_SCENE, scene.planning_scene(list(plan.boxes), m.table_z_m, m.padding_m, t), t
+            )
+            if plan.tool_path:
+                xyz = np.array([(p.x, p.y, p.z) for p in plan.tool_path])
+                self._emit(Topic.PLAN, scene.plan_line(xyz, t, plan.label), t)
         elif k is Kind.RESEND:
             self._emit(Topic.ROBOT_DESCRIPTION, convert.robot_description(self.urdf), t, record=False)
             if self._calibration is not None:
@@ -395,9 +395,12 @@ class RecordService(ServiceShell):
         self._emit(Topic.JOINT_STATES, payload, t)
         js = common_pb2.JointState.FromString(payload)
         rate = self.settings.record.foxglove.tf_rate_hz
-        if (rate <= 0 or t - self._last_tf_ns >= 1e9 / rate) and self._wanted(Topic.TF):
-            self._last_tf_ns = t
+        at = js.source_stamp_ns or t  # decimated on the controller's clock: the same states however loaded
+        if (rate <= 0 or abs(at - self._last_tf_ns) >= 1e9 / rate) and self._wanted(Topic.TF):
+            self._last_tf_ns = at
             self._emit(Topic.TF, self.transforms.message(np.asarray(js.position), js.header.stamp_ns or t), t)
+        if self.settings.record.ros2_joint_states and self._wanted(Topic.ROS2_JOINT_STATES):
+            self._emit(Topic.ROS2_JOINT_STATES, convert.ros2_joint_state(js), t)
         if js.robot_mode != self._last_mode:
             self._last_mode = js.robot_mode
             if self.robot_status_source is None:

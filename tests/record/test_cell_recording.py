@@ -22,6 +22,7 @@ from rich.console import Console
 
 from services.apps.cell import Cell
 from services.apps.record_cli import cell_live_view, run_replay
+from services.common.keys import CellKeys
 from services.common.modes import TaskKind
 from services.record.channels import Topic
 from services.record.service import RecordService
@@ -71,6 +72,9 @@ async def test_a_twin_cycle_is_live_in_foxglove_and_recorded_and_replays(
     rec_dir = tmp_path / "rec"
     s = cell_settings(
         tmp_path,
+        state={"dir": str(tmp_path / "state")},  # its own: no cycle journal another run left behind
+        # wall-clock compute deadlines as a safety net only: a loaded machine must not end the cycle at DETECT
+        task={"detect_deadline_s": 120.0, "plan_deadline_s": 120.0},
         record={
             "dir": str(rec_dir),
             "camera_rate_hz": CAMERA_RATE_HZ,
@@ -79,8 +83,13 @@ async def test_a_twin_cycle_is_live_in_foxglove_and_recorded_and_replays(
     )
     stopped: list[RecordingStopped] = []
     out = io.StringIO()
+    published: list[int] = []  # the seq of every joint state the driver published while the test listened
     async with Cell(s, seed=3) as cell, cell_live_view(cell, Console(file=out)) as view:
         assert view is not None and view.live and view.recorder is not None
+        heard = cell.bus.subscribe_callback(
+            CellKeys(cell.settings.cell_id).joint_states,
+            lambda _k, p: published.append(common_pb2.JointState.FromString(p).header.seq),
+        )
         full = RecordService(
             cell.settings,
             cell.bus,
@@ -108,6 +117,7 @@ async def test_a_twin_cycle_is_live_in_foxglove_and_recorded_and_replays(
             )
             outcome = await cell.task.runner.run_cycle(TaskKind.STAND_ROD)  # type: ignore[union-attr]
             await cell.settle(0.5)  # the last states and the pick event reach the view
+        heard.undeclare()
     # the cell carried on through the full disk: the cycle ran to its outcome (its success is
     # test_cell's business; here the arm must have moved and the outcome must have been published)
     assert outcome.stage_reached not in ("INIT", "DETECT", "PLAN"), outcome.failure_reason
@@ -167,12 +177,16 @@ async def test_a_twin_cycle_is_live_in_foxglove_and_recorded_and_replays(
     by_topic: dict[str, list[bytes]] = {}
     for topic, _t, data in messages:
         by_topic.setdefault(topic, []).append(data)
-    # joint states ≈ 125 Hz over the recording: none of the controller's packets missing
+    # every joint state published while the test listened is in the recording, in order, and they come
+    # at ≈ 125 Hz of the controller's clock (a feedback reconnect on a loaded machine may leave a gap)
     js = [common_pb2.JointState.FromString(d) for d in by_topic[Topic.JOINT_STATES]]
-    span = js[-1].source_stamp_ns - js[0].source_stamp_ns
-    assert len(js) >= 0.95 * (span / FEEDBACK_PERIOD_NS + 1)
     seqs = [m.header.seq for m in js]
-    assert seqs == sorted(seqs) and seqs[-1] - seqs[0] + 1 == len(seqs)
+    assert seqs == sorted(seqs) and len(published) > 100 and set(published) <= set(seqs)
+    span = js[-1].source_stamp_ns - js[0].source_stamp_ns
+    assert len(js) >= 0.8 * (span / FEEDBACK_PERIOD_NS + 1)
+    # the task's plans of the cycle came over the bus (the task service publishes them), with the cycle's index
+    sent = [task_pb2.TaskPlan.FromString(d) for d in by_topic[Topic.TASK_PLANS]]
+    assert sent and {p.cycle_index for p in sent} == {1} and len(sent) == len(by_topic[Topic.PLAN])
     # every pick event, once
     picks = [task_pb2.PickEvent.FromString(d) for d in by_topic[Topic.PICK_EVENTS]]
     assert [p.pick_id for p in picks] == [outcome.pick_id]

@@ -39,6 +39,12 @@ def test_every_channel_carries_a_schema_that_describes_its_messages() -> None:
             fds = descriptor_pb2.FileDescriptorSet.FromString(spec.schema_data)
             names = {f"{f.package}.{m.name}" for f in fds.file for m in f.message_type}
             assert spec.schema_name in names, spec.topic
+        elif spec.message_encoding is Encoding.CDR:  # a ROS 2 message definition ROS 2's decoder reads
+            from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
+
+            schema = Schema(id=1, name=spec.schema_name, encoding=spec.schema_encoding, data=spec.schema_data)
+            assert spec.schema_encoding == "ros2msg"
+            assert Ros2DecoderFactory().decoder_for("cdr", schema) is not None, spec.topic
         else:
             assert spec.schema_encoding == "jsonschema"
             assert json.loads(spec.schema_data)["title"] == spec.schema_name

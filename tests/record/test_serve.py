@@ -5,11 +5,13 @@ from __future__ import annotations
 import asyncio
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 from mcap.reader import make_reader
-from pickplace.v1 import common_pb2, vision_pb2
+from mcap_protobuf.decoder import DecoderFactory
+from pickplace.v1 import common_pb2, motion_pb2, task_pb2, vision_pb2
 
 from services.apps.record_cli import serve_record
 from services.common.bus import Bus
@@ -30,6 +32,22 @@ def recorded_counts(directory: Path) -> dict[str, int]:
         summary = make_reader(f).get_summary()
     assert summary is not None and summary.statistics is not None
     return {summary.channels[c].topic: n for c, n in summary.statistics.channel_message_counts.items()}
+
+
+PLAN = task_pb2.TaskPlan(
+    cycle_index=4,
+    label="APPROACH",
+    tool_path=[common_pb2.Point(x=0.4, y=0.0, z=0.3), common_pb2.Point(x=0.45, y=0.1, z=0.2)],
+    boxes=[motion_pb2.CollisionBox(name="obstacle0", x_min=0.3, x_max=0.4, y_min=-0.1, y_max=0.0, z_max=0.1)],
+)
+
+
+def decoded(directory: Path, topic: Topic) -> list[Any]:
+    """The messages of ``topic`` in the one recording under ``directory``, decoded from its own schemas."""
+    (path,) = directory.glob("*.mcap")
+    with path.open("rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        return [m for _s, _c, _m, m in reader.iter_decoded_messages(topics=[topic])]
 
 
 async def connect(url: str) -> FoxgloveClient:
@@ -61,7 +79,13 @@ async def test_serve_record_takes_the_cell_from_the_bus(tmp_path: Path) -> None:
             client = await connect(f"ws://127.0.0.1:{fport}")
             try:
                 await client.wait_for_channels({Topic.JOINT_STATES, Topic.CAMERA_COLOR})
-                await client.subscribe(Topic.JOINT_STATES, Topic.ROBOT_STATUS, Topic.CAMERA_COLOR)
+                await client.subscribe(
+                    Topic.JOINT_STATES,
+                    Topic.ROBOT_STATUS,
+                    Topic.CAMERA_COLOR,
+                    Topic.PLAN,
+                    Topic.PLANNING_SCENE,
+                )
                 seq = 0
 
                 def publish_state() -> None:
@@ -91,11 +115,14 @@ async def test_serve_record_takes_the_cell_from_the_bus(tmp_path: Path) -> None:
                 )
                 bus.publish(keys.camera_frames, frame_to_msg(frame))
                 bus.publish(keys.detected_objects, vision_pb2.DetectedObjects())
+                bus.publish(keys.task_plans, PLAN)  # as the task service of the cell publishes its plans
                 await client.wait_until(
                     lambda: (
                         client.count(Topic.JOINT_STATES) >= 51
                         and client.count(Topic.ROBOT_STATUS) > 0
                         and client.count(Topic.CAMERA_COLOR) > 0
+                        and client.count(Topic.PLAN) > 0
+                        and client.count(Topic.PLANNING_SCENE) > 0
                     )
                 )
             finally:
@@ -110,6 +137,15 @@ async def test_serve_record_takes_the_cell_from_the_bus(tmp_path: Path) -> None:
     # the recorder has every state the live client saw (and the first ones, before the client's subscription)
     assert seq >= counts[Topic.JOINT_STATES] >= client.count(Topic.JOINT_STATES) >= 51
     assert counts[Topic.CAMERA_COLOR] == 1 and counts[Topic.DETECTIONS] == 1
+    # the task's plan: the tool path as a line and the boxes with the table, live and recorded (and as sent)
+    assert counts[Topic.PLAN] == counts[Topic.PLANNING_SCENE] == counts[Topic.TASK_PLANS] == 1
+    (plan,) = decoded(tmp_path, Topic.PLAN)
+    assert [(p.x, p.y, p.z) for p in plan.entities[0].lines[0].points] == [(0.4, 0.0, 0.3), (0.45, 0.1, 0.2)]
+    (planning_scene,) = decoded(tmp_path, Topic.PLANNING_SCENE)
+    assert {e.id for e in planning_scene.entities} == {"table", "box:obstacle0"}
+    (sent,) = decoded(tmp_path, Topic.TASK_PLANS)
+    assert sent.cycle_index == 4 and sent.label == "APPROACH"
+    assert client.received[Topic.PLAN][0][1] and client.received[Topic.PLANNING_SCENE][0][1]
 
 
 async def test_a_taken_foxglove_port_is_a_configuration_error_naming_it(tmp_path: Path) -> None:
