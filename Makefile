@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 WEB_DEPS := web/node_modules/.package-lock.json
 
-.PHONY: install run test test-fast lint proto bench clean browser up up-local compose-smoke eval-long fuzz-api
+.PHONY: install run test test-fast lint proto bench clean browser wrk up up-local compose-smoke eval-long fuzz-api
 
 install: $(STAMP) $(WEB_DEPS) browser
 
@@ -26,6 +26,12 @@ browser:
 	  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null) \
 	  || echo "could not install chromium: run 'sudo apt-get install chromium'"; }
 
+# Debian's wrk, the load generator of bench_gateway's GET /system/status figure (else an httpx stand-in).
+wrk:
+	@command -v wrk >/dev/null || { echo "installing wrk (apt-get) for the gateway bench"; \
+	  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq wrk >/dev/null) \
+	  || echo "could not install wrk: run 'sudo apt-get install wrk'"; }
+
 run: install
 	$(VENV)/bin/pickplace up
 
@@ -40,7 +46,7 @@ lint: install
 proto: install
 	$(PY) -m services.common.protogen
 
-bench: install
+bench: install wrk
 	MUJOCO_GL=egl $(PY) -m bench
 
 # 1,000 randomized pick-and-stand trials and 300 sort-cubes in the twin, each in its own world

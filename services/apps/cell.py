@@ -4,6 +4,11 @@ Every service runs as it would alone — its own gRPC server on loopback, Zenoh 
 loopback, the robot driver talking Dobot TCP to the simulated controller — so a
 cycle crosses the same transports as in the multi-process deployment. Ports given
 as 0 are chosen free and written back into the settings the task's clients use.
+
+A UR model (``robot.model: ur5e | ur3``) runs the same cell on a simulated UR e-Series instead: the
+controller in its own process (:mod:`services.sim.ur.process`) with the MuJoCo twin of the UR cell
+behind it, its own loopback address, the driver over ur_rtde; the twin's camera frames, the scene
+reset between cycles and the ground truth cross that process's pipe.
 """
 
 from __future__ import annotations
@@ -11,7 +16,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -25,7 +30,30 @@ from services.sim.scene_reset import SceneReset
 from services.task.service import TaskService
 from services.vision.service import VisionService
 
+if TYPE_CHECKING:
+    from services.sim.twin.ground_truth import CubePlaceResult, RodStandResult
+    from services.sim.ur.process import URSimProcess
+    from services.sim.ur.truth import SceneRecord
+
 log = logging.getLogger("pickplace.cell")
+
+UR_MODELS = ("ur5e", "ur3")
+UR_SPEED_MAX = 100.0  # the simulated UR paces its clock; "as fast as possible" is this at most
+
+
+class TwinTruth(Protocol):
+    """The ground truth of the cell's twin an evaluation asks for (in process for the Nova5, across
+    the simulated UR's pipe for a UR)."""
+
+    def rod_standing(self) -> RodStandResult: ...
+    def cube_in_zone(self, color: str) -> CubePlaceResult: ...
+    def object_velocity(self, name: str) -> tuple[float, float]: ...
+    def object_tilt_deg(self, name: str) -> float: ...
+    def scene_record(self) -> SceneRecord: ...
+
+
+def is_ur(settings: Settings) -> bool:
+    return settings.robot.model in UR_MODELS
 
 
 def with_updates(settings: Settings, **sections: dict[str, Any]) -> Settings:
@@ -48,7 +76,9 @@ class Cell:
         self.seed = settings.sim.seed if seed is None else seed
         self.perfect_calibration = perfect_calibration
         self.calibration_error = calibration_error  # (metres, degrees) injected into T_base_camera
-        self.sim: SimDobotServer | None = None
+        self.sim: SimDobotServer | None = None  # the simulated Nova5 ...
+        self.ur_sim: URSimProcess | None = None  # ... or the simulated UR (robot.model ur5e | ur3)
+        self.truth: TwinTruth | None = None  # the twin's ground truth (twin engine only)
         self.bus: Bus | None = None
         self.robot: RobotService | None = None
         self.vision: VisionService | None = None
@@ -73,15 +103,7 @@ class Cell:
         from services.motion.service import MotionService
 
         s = with_updates(self.settings, sim={"seed": self.seed, "engine": self.engine_name})
-        self.sim = build_sim_server(s, self.engine_name)
-        await self._stack.enter_async_context(self.sim)
-        s = with_updates(
-            s,
-            robot={
-                "dashboard_port": self.sim.ports["dashboard"],
-                "feedback_port": self.sim.ports["feedback"],
-            },
-        )
+        s = await self._start_ur_sim(s) if is_ur(s) else await self._start_dobot_sim(s)
         self.bus = Bus(s.zenoh)
         await self._stack.enter_async_context(self.bus)
         self.robot = RobotService(s, self.bus)
@@ -113,13 +135,76 @@ class Cell:
         self.settings = s
         log.info(
             "cell up: sim %s, grpc robot %d motion %d grasp %d vision %d task %d",
-            self.sim.ports,
+            self.sim_address,
             self.robot.grpc_port,
             motion_port,
             grasp_port,
             self.vision.grpc_port,
             self.task.grpc_port,
         )
+
+    async def _start_dobot_sim(self, s: Settings) -> Settings:
+        self.sim = build_sim_server(s, self.engine_name)
+        await self._stack.enter_async_context(self.sim)
+        if self.engine_name == "twin":
+            from services.sim.twin.ur_cell import EngineTruth
+
+            self.truth = EngineTruth(lambda: self.engine)
+        return with_updates(
+            s,
+            robot={
+                "dashboard_port": self.sim.ports["dashboard"],
+                "feedback_port": self.sim.ports["feedback"],
+            },
+        )
+
+    async def _start_ur_sim(self, s: Settings) -> Settings:
+        """The simulated UR with the twin of the UR cell, in its own process on a loopback address of
+        its own (ur_rtde fixes the ports); the cell's settings become a UR cell's (driver ur_rtde,
+        gripper on the tool outputs)."""
+        from services.common.errors import ConfigurationError
+        from services.sim.twin.ur_cell import ur_cell_settings
+        from services.sim.ur.process import PipeTruth, SimSpec, URSimProcess
+        from services.sim.ur.server import free_loopback_host
+
+        if self.engine_name != "twin":
+            raise ConfigurationError(
+                f"a {s.robot.model} cell runs on the twin engine (its camera and objects), not {self.engine_name!r}"
+            )
+        s = ur_cell_settings(s, s.robot.model)
+        host = await asyncio.to_thread(free_loopback_host)
+        spec = SimSpec(
+            s.robot.model,
+            host,
+            speed=min(s.sim.speed, UR_SPEED_MAX),
+            twin=True,
+            seed=self.seed,
+            settings=s,
+        )
+        sim = URSimProcess(spec)
+        await asyncio.to_thread(sim.__enter__)
+        self._stack.push_async_callback(asyncio.to_thread, sim.__exit__, None, None, None)
+        self.ur_sim, self.truth = sim, PipeTruth(sim)
+        return with_updates(s, robot={"host": host})
+
+    @property
+    def sim_address(self) -> str:
+        """Where the simulated controller listens (for the console)."""
+        if self.ur_sim is not None:
+            return f"{self.ur_sim.host} (RTDE 30004, dashboard 29999)"
+        assert self.sim is not None
+        return f"127.0.0.1:{self.sim.ports['dashboard']}"
+
+    def sim_time(self) -> float:
+        """The simulated controller's clock (s)."""
+        if self.sim is not None:
+            return float(self.sim.controller.sim_time)
+        return self.controller_clock()
+
+    @property
+    def sim_late_ticks(self) -> int:
+        """Control cycles the simulated Dobot ran late (the simulated UR slows its clock instead)."""
+        return self.sim.late_ticks if self.sim is not None else 0
 
     async def _on_config(self, new: Settings, changed: list[str]) -> None:
         """PUT /config for the part of the cell this object holds: the twin's scene layout from the next
@@ -148,6 +233,10 @@ class Cell:
     def _camera(self):  # type: ignore[no-untyped-def]
         if self.engine_name != "twin":
             return None
+        if self.ur_sim is not None:
+            from services.sim.ur.process import PipeCamera
+
+            return PipeCamera(self.ur_sim)
         from services.sim.twin.camera import TwinCamera
 
         return TwinCamera(self.engine, seed=self.seed)
@@ -179,6 +268,10 @@ class Cell:
         from services.sim.twin.camera import TwinCamera
         from services.sim.twin.engine import TwinEngine
 
+        if self.ur_sim is not None:  # the camera in the UR's process follows its engine there
+            await asyncio.to_thread(self.ur_sim.reset_scene, seed)
+            self.seed = seed
+            return
         assert self.sim is not None and self.vision is not None
         vision = self.vision
 

@@ -66,7 +66,7 @@ def _settings(
     try:
         s = load_settings(profile, config, overrides={k: v for k, v in overrides.items() if v})
     except ConfigurationError as exc:
-        console.print(f"[red]configuration error:[/red] {exc}")
+        console.print(f"[red]configuration error:[/red] {exc}", soft_wrap=True)
         raise typer.Exit(2) from None
     setup_logging(s.logging, console=console_log)
     return s
@@ -81,10 +81,10 @@ def _run(coro: Coroutine[Any, Any, Any]) -> Any:
         console.print("[yellow]stopped[/yellow]")
         return None
     except RobotError as exc:
-        console.print(f"[red]{type(exc).__name__}:[/red] {exc}")
+        console.print(f"[red]{type(exc).__name__}:[/red] {exc}", soft_wrap=True)
         raise typer.Exit(1) from None
     except OSError as exc:  # typically a port another pickplace process already holds
-        console.print(f"[red]cannot start:[/red] {exc} (is another pickplace cell running?)")
+        console.print(f"[red]cannot start:[/red] {exc} (is another pickplace cell running?)", soft_wrap=True)
         raise typer.Exit(1) from None
 
 
@@ -137,6 +137,9 @@ def evaluate(
         bool,
         typer.Option("--nominal", help="no per-trial randomization: every trial in the configured world"),
     ] = False,
+    robot: Annotated[
+        str, typer.Option(help="robot model: nova5 | ur5e | ur3 (a UR runs on the simulated UR, ur_rtde)")
+    ] = "",
     profile: ProfileOpt = None,
     config: ConfigOpt = None,
 ) -> None:
@@ -158,6 +161,7 @@ def evaluate(
         sim={"speed": speed, "dashboard_port": 0, "feedback_port": 0, "slow_feedback_port": 0},
         grpc={"robot_port": 0, "motion_port": 0, "grasp_port": 0, "vision_port": 0, "task_port": 0},
         zenoh={"listen": [f"tcp/127.0.0.1:{zport}"]},
+        **({"robot": {"model": robot}} if robot else {}),
     )
     s.logging.level = "WARNING"
     setup_logging(s.logging, console=True)

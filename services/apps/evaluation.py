@@ -259,12 +259,11 @@ async def run_eval(
         async with Cell(
             s, seed=seed, perfect_calibration=calibrated, calibration_error=calibration_error
         ) as cell:
-            assert cell.sim is not None
-            sim_t0 = cell.sim.controller.sim_time
+            sim_t0 = cell.sim_time()
             await trial.run_all(cell, report, trials, seed, console, progress)
             wall = time.perf_counter() - t_start
-            report.sim_speed_achieved = (cell.sim.controller.sim_time - sim_t0) / wall if wall > 0 else None
-            report.sim_late_ticks = cell.sim.late_ticks
+            report.sim_speed_achieved = (cell.sim_time() - sim_t0) / wall if wall > 0 else None
+            report.sim_late_ticks = cell.sim_late_ticks
     report.wall_time_s = time.perf_counter() - t_start
     return report
 
@@ -280,14 +279,13 @@ class _TrialRunner:
     async def run_all(
         self, cell: Cell, report: EvalReport, trials: int, seed: int, console: Console | None, progress: bool
     ) -> None:
-        from services.sim.twin import ground_truth as gt
-
-        assert cell.task is not None  # a Cell starts its task service on entry
+        assert cell.task is not None and cell.truth is not None  # a twin Cell starts both on entry
         runner = cell.task.runner
+        truth = cell.truth
 
         def on_state(state: CycleState, msg: str) -> None:
             if state is CycleState.RELEASE and self.task == TaskKind.STAND_ROD:
-                self.tilt_at_release.append(gt.axis_tilt_deg(gt.object_pose(cell.engine, "rod")))
+                self.tilt_at_release.append(truth.object_tilt_deg("rod"))
             runner._on_state(state, msg)
 
         runner.orchestrator._on_state = on_state
@@ -318,19 +316,14 @@ class _TrialRunner:
                 bar.update(job, advance=1, rate=f"{report.successes}/{i + 1} ok")
 
     async def judge(self, cell: Cell, seed: int, outcome: PickOutcome) -> TrialResult:
-        from services.sim.twin import ground_truth as gt
-
+        assert cell.truth is not None
         settled_s = await _settle_until_rest(cell, _placed_object(self.task, outcome.object_class))
         if self.task == TaskKind.STAND_ROD:
-            check = gt.check_rod_standing(cell.engine)
+            check = cell.truth.rod_standing()
             ok, reasons, tilt_after = check.success, list(check.reasons), check.tilt_deg
         else:
             color = outcome.object_class.removeprefix("cube_")
-            cube = (
-                gt.check_cube_in_zone(cell.engine, color)
-                if outcome.object_class.startswith("cube_")
-                else None
-            )
+            cube = cell.truth.cube_in_zone(color) if outcome.object_class.startswith("cube_") else None
             ok = bool(cube and cube.success)
             reasons = list(cube.reasons) if cube else ["no cube was picked"]
             tilt_after = None
@@ -366,7 +359,7 @@ class _TrialRunner:
             bound_motion_s=bound_motion,
             bound_gripper_s=bound_gripper,
             executed_waypoints=outcome.executed_waypoints,
-            scene_redraws=cell.engine.scene.layout_redraws,
+            scene_redraws=cell.truth.scene_record().layout_redraws,
             randomization=_world_record(cell, seed),
         )
 
@@ -380,13 +373,13 @@ def _with_randomization(settings: Settings, enabled: bool) -> Settings:
 
 def _world_record(cell: Cell, seed: int) -> dict[str, float]:
     """The randomization record of the world the trial of ``seed`` ran in ({} when nominal or unknown)."""
+    if cell.truth is None:  # no twin engine (yet): nothing to record
+        return {}
     try:
-        world = cell.engine.world
-    except (AssertionError, AttributeError):  # no twin engine (yet): nothing to record
+        scene = cell.truth.scene_record()
+    except (AssertionError, AttributeError, OSError, RuntimeError):  # no engine (yet) or no sim: none
         return {}
-    if not world.variation.randomized or world.scene.seed != seed:
-        return {}
-    return world.variation.record()
+    return scene.randomization if scene.seed == seed else {}
 
 
 def _harness_error(seed: int, exc: BaseException) -> TrialResult:
@@ -419,10 +412,11 @@ async def _settle_until_rest(cell: Cell, name: str | None) -> float:
     sim seconds waited; a still-moving object after MAX_SETTLE_S is judged as it is."""
     from services.sim.twin import ground_truth as gt
 
+    assert cell.truth is not None
     await cell.settle(SETTLE_S)
     waited = SETTLE_S
     while name is not None and waited < MAX_SETTLE_S:
-        lin, ang = gt.object_velocity(cell.engine, name)
+        lin, ang = cell.truth.object_velocity(name)
         if lin < gt.REST_LINEAR_M_S and ang < gt.REST_ANGULAR_RAD_S:
             break
         await cell.settle(SETTLE_STEP_S)

@@ -32,9 +32,10 @@ from typing import Annotated, Any
 import typer
 
 from services.apps.cycles import drive_cycles
-from services.apps.probes import check_health, serve_metrics_dir
+from services.apps.probes import accepts_connections, check_health, serve_metrics_dir
 from services.apps.topology import (
     MULTIPROC_ENV,
+    RECORD,
     SERVICES,
     LocalPorts,
     ProcessSpec,
@@ -48,6 +49,9 @@ from services.common.settings import REPO_ROOT, Settings, load_settings
 
 log = logging.getLogger("pickplace.launcher")
 
+# the processes that store and record what the others publish: stopped once the others are gone
+_CONSUMERS = frozenset({"gateway", RECORD})
+
 
 # ---------------------------------------------------------------------------- the process supervisor
 @dataclass
@@ -57,6 +61,7 @@ class Child:
     restarts: int = 0
     exits: list[int] = field(default_factory=list)
     started_at: float = 0.0
+    started_wall: float = 0.0  # time.time() at the start: files it writes are newer
 
     @property
     def pid(self) -> int | None:
@@ -134,7 +139,13 @@ class Launcher:
         if gateway is not None:
             await self.run_once("db-upgrade", ("db", "upgrade"), gateway.spec.env)
         # The controller first, then its driver; the stateless planners and the rest together.
-        for group in (("sim-dobot",), ("robot",), ("motion", "grasp", "vision", "task"), ("gateway",)):
+        for group in (
+            ("sim-dobot",),
+            ("robot",),
+            ("motion", "grasp", "vision", "task"),
+            ("gateway",),
+            (RECORD,),
+        ):
             names = [n for n in group if n in self.children]
             for n in names:
                 await self._spawn(self.children[n])
@@ -153,29 +164,19 @@ class Launcher:
         return open_session(zs)
 
     async def stop(self) -> None:
-        """SIGTERM every child (gateway first, the controller last), SIGKILL what is left after the grace."""
+        """SIGTERM the services that publish, then, once they are gone, the ones that store and record
+        (gateway, recorder): a cycle's last record, or the interrupted one of a cycle cut by the stop,
+        reaches the database before its writer stops. SIGKILL what is left after the grace."""
         self._stopping = True
         for t in self._watchers:
             t.cancel()
         await asyncio.gather(*self._watchers, return_exceptions=True)
         self._watchers.clear()
-        for name in reversed(SERVICES):
-            child = self.children.get(name)
-            if child is not None and child.alive:
-                assert child.proc is not None
-                with contextlib.suppress(ProcessLookupError):
-                    child.proc.send_signal(signal.SIGTERM)
         deadline = time.monotonic() + self.stop_grace_s
-        for child in self.children.values():
-            if child.proc is None:
-                continue
-            try:
-                await asyncio.wait_for(child.proc.wait(), max(0.1, deadline - time.monotonic()))
-            except TimeoutError:
-                log.warning("%s did not stop within %.0f s; killing it", child.spec.name, self.stop_grace_s)
-                with contextlib.suppress(ProcessLookupError):
-                    child.proc.kill()
-                await child.proc.wait()
+        names = list(reversed([spec.name for spec in self.specs]))  # the reverse of the start order
+        consumers = [n for n in names if n in _CONSUMERS]
+        await self._stop_children([n for n in names if n not in _CONSUMERS], deadline)
+        await self._stop_children(consumers, max(deadline, time.monotonic() + self.stop_grace_s / 2))
         for server in self._metrics_servers:
             with contextlib.suppress(Exception):
                 server.shutdown()
@@ -185,6 +186,24 @@ class Launcher:
             router, self._router = self._router, None
             with contextlib.suppress(Exception):
                 await asyncio.to_thread(router.close)
+
+    async def _stop_children(self, names: list[str], deadline: float) -> None:
+        children = [self.children[n] for n in names if n in self.children]
+        for child in children:
+            if child.alive:
+                assert child.proc is not None
+                with contextlib.suppress(ProcessLookupError):
+                    child.proc.send_signal(signal.SIGTERM)
+        for child in children:
+            if child.proc is None:
+                continue
+            try:
+                await asyncio.wait_for(child.proc.wait(), max(0.1, deadline - time.monotonic()))
+            except TimeoutError:
+                log.warning("%s did not stop within %.0f s; killing it", child.spec.name, self.stop_grace_s)
+                with contextlib.suppress(ProcessLookupError):
+                    child.proc.kill()
+                await child.proc.wait()
 
     # ---------------------------------------------------------------- children
     def _event(self, service: str, kind: str, detail: str) -> None:
@@ -248,7 +267,7 @@ class Launcher:
                 stderr=asyncio.subprocess.STDOUT,
                 start_new_session=True,
             )
-        child.started_at = time.monotonic()
+        child.started_at, child.started_wall = time.monotonic(), time.time()
         self._event(spec.name, "started", f"pid {child.proc.pid}: pickplace {' '.join(spec.args)}")
 
     async def wait_healthy(self, name: str, timeout_s: float | None = None) -> None:
@@ -262,7 +281,11 @@ class Launcher:
                     f"see {self.log_dir / (name + '.out')}"
                 )
             try:
-                detail = await check_health(self.settings, name, timeout_s=2.0)
+                detail = await (
+                    record_health(self.settings, child.spec.env, child.started_wall)
+                    if name == RECORD
+                    else check_health(self.settings, name, timeout_s=2.0)
+                )
             except RobotCommunicationError as exc:
                 last = str(exc)
                 await asyncio.sleep(0.3)
@@ -307,6 +330,23 @@ class Launcher:
         raise RobotCommunicationError(
             f"{name} was not restarted {restarts} time(s) and healthy within {timeout_s} s"
         )
+
+
+async def record_health(settings: Settings, env: dict[str, str], started_wall: float) -> str:
+    """The record process is up when its Foxglove live view accepts connections, or (without one) when it
+    has opened this run's first MCAP file under its directory."""
+    port = int(env.get("PICKPLACE_RECORD__FOXGLOVE__PORT", "0"))
+    if env.get("PICKPLACE_RECORD__FOXGLOVE__ENABLED") == "true" and port:
+        host = settings.record.foxglove.host
+        await accepts_connections(host, port, 2.0, "record: Foxglove live view")
+        return f"record: Foxglove live view ws://{host}:{port} accepts connections"
+    directory = Path(env["PICKPLACE_RECORD__DIR"])
+    files = await asyncio.to_thread(
+        lambda: [p for p in directory.glob("*.mcap") if p.stat().st_mtime >= started_wall - 1.0]
+    )
+    if not files:
+        raise RobotCommunicationError(f"record: no MCAP file of this run under {directory} yet")
+    return f"record: writing {max(files)}"
 
 
 # ---------------------------------------------------------------------------- state and session log
@@ -394,6 +434,7 @@ async def run_processes(
         metrics_root=var / "metrics",
         log_dir=var / "log" / "processes",
         state_dir=var / "gateway",
+        task_state_dir=var,  # the task's cycle journal: a cycle cut by a crash is recorded on restart
     )
 
     def show(ev: LauncherEvent) -> None:

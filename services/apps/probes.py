@@ -20,19 +20,23 @@ def _dial_host(host: str) -> str:
     return "127.0.0.1" if host in ("0.0.0.0", "", "::") else host
 
 
+async def accepts_connections(host: str, port: int, timeout_s: float, what: str) -> None:
+    """A TCP connection to ``host:port`` is accepted (then closed); RobotCommunicationError naming
+    ``what`` otherwise."""
+    try:
+        _r, w = await asyncio.wait_for(asyncio.open_connection(host, port), timeout_s)
+    except (OSError, TimeoutError) as exc:
+        raise RobotCommunicationError(f"{what} {host}:{port} not reachable: {exc}") from exc
+    w.close()
+    with contextlib.suppress(OSError):
+        await w.wait_closed()
+
+
 async def check_health(settings: Settings, service: str, timeout_s: float = 3.0) -> str:
     """Is ``service`` up and answering? Returns what was checked; raises RobotCommunicationError if not."""
     if service == "sim-dobot":
         host, port = _dial_host(settings.sim.host), settings.sim.dashboard_port
-        try:
-            _r, w = await asyncio.wait_for(asyncio.open_connection(host, port), timeout_s)
-        except (OSError, TimeoutError) as exc:
-            raise RobotCommunicationError(
-                f"simulated Dobot dashboard {host}:{port} not reachable: {exc}"
-            ) from exc
-        w.close()
-        with contextlib.suppress(OSError):
-            await w.wait_closed()
+        await accepts_connections(host, port, timeout_s, "simulated Dobot dashboard")
         return f"sim-dobot dashboard {host}:{port} accepts connections"
     if service in GRPC_SERVICES:
         from services.common.grpc_util import check_health as grpc_health

@@ -20,7 +20,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
-import numpy as np
 import typer
 from pickplace.v1 import robot_pb2
 from rich.console import Console
@@ -42,7 +41,6 @@ from services.record.service import RecordService
 if TYPE_CHECKING:
     from services.apps.cell import Cell
     from services.robot.service import RobotService
-    from services.task.clients import GrpcMotion
     from services.vision.service import VisionService
 
 app = typer.Typer(no_args_is_help=True)
@@ -94,35 +92,6 @@ def tap_vision(vision: VisionService, view: RecordService) -> Callable[[], None]
     return lambda: pipeline.__dict__.pop("detect", None)
 
 
-def _plan_view(out: Any, moves: Any, obstacles: Any, boxes_msg: Any) -> tuple[np.ndarray, list[Any], str]:
-    """The joint knots of a plan, the boxes of its scenes (the plan's and each move's own), its labels."""
-    seen: dict[tuple[float, ...], Any] = {}
-    for b in (*obstacles, *(b for m in moves for b in m.obstacles)):
-        seen.setdefault((*np.ravel(b.min), *np.ravel(b.max)), b)
-    paths = [t.positions for t in out if t is not None]
-    q = np.concatenate(paths) if paths else np.zeros((0, 6))
-    return q, boxes_msg(tuple(seen.values())), "+".join(m.label for m in moves if m.label)
-
-
-def tap_motion(motion: GrpcMotion, view: RecordService) -> Callable[[], None]:
-    """Hand every plan the task gets from motion (and the boxes it asked motion to avoid) to the view:
-    nothing publishes plans on the bus. Returns the undo."""
-    from services.task.clients import boxes_msg
-
-    inner = motion.plan_moves
-
-    async def plan_moves(start: Any, moves: Any, obstacles: Any) -> Any:
-        out = await inner(start, moves, obstacles)
-        try:
-            view.offer_plan(*_plan_view(out, moves, obstacles, boxes_msg))
-        except Exception:  # the view must never break the cycle: shown as missing, logged
-            log.warning("record: cannot show a plan", exc_info=True)
-        return out
-
-    setattr(motion, "plan_moves", plan_moves)  # noqa: B010 — an instance attribute over the method, undone on exit
-    return lambda: motion.__dict__.pop("plan_moves", None)
-
-
 @contextlib.asynccontextmanager
 async def cell_live_view(cell: Cell, console: Console) -> AsyncIterator[RecordService | None]:
     s = cell.settings
@@ -134,8 +103,7 @@ async def cell_live_view(cell: Cell, console: Console) -> AsyncIterator[RecordSe
         s, cell.bus, T_base_camera=cell.vision.T_base_camera, robot_status=driver_status(cell.robot)
     )
     async with view:
-        undo_vision = tap_vision(cell.vision, view)
-        undo_motion = tap_motion(cell.task.clients.motion, view) if cell.task is not None else (lambda: None)
+        undo_vision = tap_vision(cell.vision, view)  # the plans come on the bus (the task publishes them)
         try:
             if view.live:
                 console.print(
@@ -146,7 +114,6 @@ async def cell_live_view(cell: Cell, console: Console) -> AsyncIterator[RecordSe
                 console.print(f"recording MCAP under {view.record_dir}")
             yield view
         finally:
-            undo_motion()
             undo_vision()
 
 
@@ -300,7 +267,7 @@ def replay(
     try:
         open_recording(file)
     except InvalidInputError as exc:
-        console.print(f"[red]cannot replay:[/red] {exc}")
+        console.print(f"[red]cannot replay:[/red] {exc}", soft_wrap=True)
         raise typer.Exit(2) from None
     report = _run(
         run_replay(s, file, fast=fast, live=not no_foxglove, detect=detect, tolerance_m=tolerance_mm / 1000)

@@ -15,6 +15,9 @@ from services.common.settings import Settings
 
 # Start order: the simulated controller first (the robot driver connects to it), the gateway last.
 SERVICES = ("sim-dobot", "robot", "motion", "grasp", "vision", "task", "gateway")
+# The live view and recorder of the cell (``pickplace serve record``): a process of the local run when it
+# records (``up --processes --record DIR``), started after the gateway; compose and Kubernetes leave it out.
+RECORD = "record"
 GRPC_SERVICES = ("robot", "motion", "grasp", "vision", "task")
 MULTIPROC_ENV = "PROMETHEUS_MULTIPROC_DIR"
 
@@ -33,7 +36,9 @@ CONTAINER_ONLY_ENV = frozenset(
     }
 )
 # Names only the local run sets: a per-process log file, a throw-away PostgreSQL schema (tests).
-LOCAL_ONLY_ENV = frozenset({"PICKPLACE_LOGGING__FILE", "PICKPLACE_DATABASE__SCHEMA_NAME"})
+LOCAL_ONLY_ENV = frozenset(
+    {"PICKPLACE_LOGGING__FILE", "PICKPLACE_DATABASE__SCHEMA_NAME", "PICKPLACE_STATE__DIR"}
+)
 
 DEFAULT_METRICS_PORTS = {
     "sim-dobot": 9100,
@@ -58,6 +63,7 @@ class LocalPorts:
     sim_feedback: int
     sim_slow: int
     metrics: dict[str, int]
+    foxglove: int = 0  # the record process's live view (0: not served)
 
     @classmethod
     def from_settings(cls, s: Settings) -> LocalPorts:
@@ -75,12 +81,13 @@ class LocalPorts:
             sim_feedback=s.sim.feedback_port,
             sim_slow=s.sim.slow_feedback_port,
             metrics=dict(DEFAULT_METRICS_PORTS),
+            foxglove=s.record.foxglove.port if s.record.foxglove.enabled else 0,
         )
 
     @classmethod
     def free(cls) -> LocalPorts:
         """All ports chosen free on 127.0.0.1 (tests; two runs side by side)."""
-        ports = free_loopback_ports(12 + len(DEFAULT_METRICS_PORTS))
+        ports = free_loopback_ports(13 + len(DEFAULT_METRICS_PORTS))
         it = iter(ports)
         return cls(
             zenoh=next(it),
@@ -91,6 +98,7 @@ class LocalPorts:
             sim_feedback=next(it),
             sim_slow=next(it),
             metrics={name: next(it) for name in DEFAULT_METRICS_PORTS},
+            foxglove=next(it),
         )
 
     def all(self) -> dict[str, int]:
@@ -101,6 +109,7 @@ class LocalPorts:
             "sim-dashboard": self.sim_dashboard,
             "sim-feedback": self.sim_feedback,
             "sim-slow": self.sim_slow,
+            "foxglove": self.foxglove,
         }
         out.update({f"grpc-{k}": v for k, v in self.grpc.items()})
         out.update({f"metrics-{k}": v for k, v in self.metrics.items()})
@@ -135,8 +144,8 @@ def service_args(name: str) -> tuple[str, ...]:
     """The command each service runs, the same in compose, Kubernetes and here."""
     if name == "sim-dobot":
         return ("sim-dobot", "--engine", "twin")
-    if name not in SERVICES:
-        raise ConfigurationError(f"unknown service {name!r}; the topology has {list(SERVICES)}")
+    if name not in (*SERVICES, RECORD):
+        raise ConfigurationError(f"unknown service {name!r}; the topology has {[*SERVICES, RECORD]}")
     return ("serve", name)
 
 
@@ -150,8 +159,10 @@ def topology(
     database_url: str | None = None,
     seed: int | None = None,
     state_dir: Path | None = None,
+    task_state_dir: Path | None = None,
 ) -> list[ProcessSpec]:
-    """The child processes of the local run, in start order (pure: no I/O)."""
+    """The child processes of the local run, in start order (pure: no I/O); the recorder last when
+    ``record.dir`` is set."""
     ports.check()
     common = {
         "PICKPLACE_PROFILE": settings.profile,
@@ -184,18 +195,28 @@ def topology(
             else str(settings.gateway.pick_spill_file),
         },
     }
+    if settings.record.dir:  # its Foxglove live view on the run's port, or none
+        live = settings.record.foxglove.enabled and ports.foxglove > 0
+        specific[RECORD] = {
+            "PICKPLACE_RECORD__DIR": str(settings.record.dir),
+            "PICKPLACE_RECORD__FOXGLOVE__ENABLED": json.dumps(live),
+            **({"PICKPLACE_RECORD__FOXGLOVE__PORT": str(ports.foxglove)} if live else {}),
+        }
     if settings.database.schema_name:
         specific["gateway"]["PICKPLACE_DATABASE__SCHEMA_NAME"] = settings.database.schema_name
+    if task_state_dir is not None:  # the task's journal of the cycle in progress outlives the process here
+        specific["task"] = {"PICKPLACE_STATE__DIR": str(task_state_dir)}
     specs = []
-    for name in SERVICES:
+    for name in (*SERVICES, *((RECORD,) if RECORD in specific else ())):
         env = {**common, **specific.get(name, {})}
         if name != "sim-dobot":  # every gRPC service asks for the cell's token, every client sends it
             env["PICKPLACE_GATEWAY__API_TOKEN"] = api_token
         if log_dir is not None:
             env["PICKPLACE_LOGGING__FILE"] = str(log_dir / f"{name}.log")
         metrics_port = None
-        # The gateway renders its own registry at /metrics; every other service writes to a directory.
-        if name != "gateway" and metrics_root is not None:
+        # The gateway renders its own registry at /metrics; every other service writes to a directory
+        # (the recorder has no metrics of its own).
+        if name not in ("gateway", RECORD) and metrics_root is not None:
             env[MULTIPROC_ENV] = str(metrics_root / name)
             metrics_port = ports.metrics[name]
         specs.append(ProcessSpec(name, service_args(name), env, metrics_port))

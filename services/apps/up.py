@@ -5,6 +5,11 @@ vision, grasp, motion, robot-driver and task services on loopback, and a live
 terminal display of the pick cycle (state, cycles, success rate, cycle time) with
 a summary when it stops. ``job="keypose"`` runs seed 003's key-pose cycle on the
 kinematic simulator instead (no vision, no objects).
+
+A UR model (``robot.model: ur5e | ur3``) runs on a simulated UR e-Series through ur_rtde instead of the
+simulated Dobot (the driver ``ur_rtde`` is selected for it): the pick cell on the UR twin
+(:class:`services.apps.cell.Cell`), and the key-pose job with seed 003's own poses and 2 s dwell
+(``config/robots/ur3-keypose.yaml``'s cycle, unless a cycle is configured).
 """
 
 from __future__ import annotations
@@ -21,17 +26,21 @@ from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
-from services.apps.cell import Cell
+from services.apps.cell import Cell, is_ur
 from services.apps.record_cli import cell_live_view
 from services.common.bus import Bus
 from services.common.sensors import Camera, CameraIntrinsics, RGBDFrame
-from services.common.settings import Settings
+from services.common.settings import Settings, load_settings
+from services.common.settings.loader import CONFIG_DIR
+from services.common.settings.robot import KeyPoseCycleSettings
 from services.robot.demo_cycle import CycleEvent, CycleReport, run_keypose_cycle
 from services.robot.service import RobotService
 from services.sim.app import build_sim_server
 from services.task.states import PickOutcome, TaskCounters
 
 log = logging.getLogger("pickplace.app")
+
+SEED_003_CYCLE = CONFIG_DIR / "robots" / "ur3-keypose.yaml"  # seed 003's key poses (a UR's) and dwell
 
 
 async def run_all_in_one(
@@ -124,7 +133,7 @@ async def run_pick_cell(
         console.print(f"dashboard: [link={url}]{url}[/link]")
         console.print(
             f"[bold]pickplace[/bold] cell [cyan]{s.cell_id}[/cyan]: simulated {s.robot.model} twin on "
-            f"127.0.0.1:{cell.sim.ports['dashboard']} (seed {cell.seed}), gRPC robot {s.grpc.robot_port} / "  # type: ignore[union-attr]
+            f"{cell.sim_address} (seed {cell.seed}), {s.robot.driver.value} driver, gRPC robot {s.grpc.robot_port} / "
             f"task {s.grpc.task_port}, Zenoh {s.zenoh.listen}; calibration: {cell.vision.calibration_source}"  # type: ignore[union-attr]
         )
         console.print("Ctrl-C stops after a summary. Another terminal: [green]pickplace robot watch[/green]")
@@ -244,49 +253,83 @@ def _pick_summary(console: Console, c: TaskCounters, outcomes: list[PickOutcome]
 
 
 # ---------------------------------------------------------------------------- key-pose demo
+def ur_keypose_settings(settings: Settings) -> Settings:
+    """A UR's key-pose job: the UR cell's settings (driver ur_rtde, gripper on the tool outputs) and,
+    unless a cycle is configured, seed 003's own (``SEED_003_CYCLE``: its poses, dwell and the tool
+    tip's box they need)."""
+    from services.sim.twin.ur_cell import ur_cell_settings
+
+    s = ur_cell_settings(settings, settings.robot.model)
+    if s.cycle == KeyPoseCycleSettings():
+        seed_003 = load_settings(settings.profile, SEED_003_CYCLE)
+        robot = s.robot.model_copy(update={"workspace": seed_003.robot.workspace})
+        s = s.model_copy(update={"cycle": seed_003.cycle, "robot": robot})
+    return s
+
+
+@contextlib.asynccontextmanager
+async def keypose_sim(settings: Settings, engine: str) -> AsyncIterator[Settings]:
+    """The simulated controller of ``settings.robot.model`` for the key-pose job; yields the settings
+    that reach it (a UR: its own process on a loopback address of its own; a Nova5: in this process)."""
+    if is_ur(settings):
+        from services.sim.ur.process import SimSpec, URSimProcess
+        from services.sim.ur.server import free_loopback_host
+
+        host = await asyncio.to_thread(free_loopback_host)
+        spec = SimSpec(settings.robot.model, host, twin=engine == "twin", settings=settings)
+        sim = URSimProcess(spec)
+        await asyncio.to_thread(sim.__enter__)
+        try:
+            yield settings.model_copy(update={"robot": settings.robot.model_copy(update={"host": host})})
+        finally:
+            await asyncio.to_thread(sim.__exit__, None, None, None)
+        return
+    async with build_sim_server(settings, engine) as server:
+        r = settings.robot.model_copy(
+            update={"dashboard_port": server.ports["dashboard"], "feedback_port": server.ports["feedback"]}
+        )
+        yield settings.model_copy(update={"robot": r})
+
+
 async def run_keypose_demo(settings: Settings, cycles: int, engine: str, console: Console) -> CycleReport:
     total = CycleReport()
-    async with build_sim_server(settings, engine) as sim:
-        r = settings.robot
-        settings = settings.model_copy(
-            update={
-                "robot": r.model_copy(
-                    update={"dashboard_port": sim.ports["dashboard"], "feedback_port": sim.ports["feedback"]}
-                )
-            }
+    if is_ur(settings):
+        settings = ur_keypose_settings(settings)
+    async with (
+        keypose_sim(settings, engine) as settings,  # rebound: the settings that reach the sim
+        Bus(settings.zenoh) as bus,
+        RobotService(settings, bus) as svc,
+    ):
+        console.print(
+            f"key-pose cycle on the simulated {settings.robot.model} ({engine}, "
+            f"{settings.robot.driver.value} driver on {settings.robot.host}); gRPC "
+            f"{settings.grpc.host}:{svc.grpc_port}, Zenoh {settings.zenoh.listen}"
         )
-        async with Bus(settings.zenoh) as bus, RobotService(settings, bus) as svc:
+        await svc.driver.enable()
+
+        def show(ev: CycleEvent) -> None:
             console.print(
-                f"key-pose cycle on the simulated {settings.robot.model} ({engine}); gRPC "
-                f"{settings.grpc.host}:{svc.grpc_port}, Zenoh {settings.zenoh.listen}"
+                f"cycle {ev.cycle} [{ev.step}/{ev.steps}] → [bold]{ev.pose:<10}[/bold] "
+                f"in {ev.duration_s:5.2f}s (error {ev.position_error_deg:.3f}°)"
             )
-            await svc.driver.enable()
 
-            def show(ev: CycleEvent) -> None:
-                console.print(
-                    f"cycle {ev.cycle} [{ev.step}/{ev.steps}] → [bold]{ev.pose:<10}[/bold] "
-                    f"in {ev.duration_s:5.2f}s (error {ev.position_error_deg:.3f}°)"
+        try:
+            for _ in itertools.islice(itertools.count(), cycles):
+                # svc.settings follows PUT /config: a changed cycle or speed applies from the next cycle
+                rep = await run_keypose_cycle(
+                    svc.driver, svc.settings.cycle, 1, svc.settings.robot.speed_ratio, show
                 )
-
-            try:
-                for _ in itertools.islice(itertools.count(), cycles):
-                    # svc.settings follows PUT /config: a changed cycle or speed applies from the next cycle
-                    rep = await run_keypose_cycle(
-                        svc.driver, svc.settings.cycle, 1, svc.settings.robot.speed_ratio, show
-                    )
-                    total.cycles += rep.cycles
-                    total.moves += rep.moves
-                    total.cycle_times_s += rep.cycle_times_s
-                    total.max_position_error_deg = max(
-                        total.max_position_error_deg, rep.max_position_error_deg
-                    )
-            finally:
-                t = Table(title="summary")
-                t.add_column("metric")
-                t.add_column("value", justify="right")
-                t.add_row("cycles", str(total.cycles))
-                t.add_row("moves", str(total.moves))
-                t.add_row("max end-of-move error", f"{total.max_position_error_deg:.3f}°")
-                t.add_row("joint states published", str(svc.hub.published))
-                console.print(t)
+                total.cycles += rep.cycles
+                total.moves += rep.moves
+                total.cycle_times_s += rep.cycle_times_s
+                total.max_position_error_deg = max(total.max_position_error_deg, rep.max_position_error_deg)
+        finally:
+            t = Table(title="summary")
+            t.add_column("metric")
+            t.add_column("value", justify="right")
+            t.add_row("cycles", str(total.cycles))
+            t.add_row("moves", str(total.moves))
+            t.add_row("max end-of-move error", f"{total.max_position_error_deg:.3f}°")
+            t.add_row("joint states published", str(svc.hub.published))
+            console.print(t)
     return total

@@ -43,7 +43,7 @@ def _settings(profile: str | None) -> Settings:
     try:
         return load_settings(profile)
     except ConfigurationError as exc:
-        console.print(f"[red]configuration error:[/red] {exc}")
+        console.print(f"[red]configuration error:[/red] {exc}", soft_wrap=True)
         raise typer.Exit(2) from None
 
 
@@ -93,7 +93,7 @@ def open_camera(settings: Settings, source: str = "", seed: int = 0) -> Iterator
 
 
 def _fail(exc: RobotError) -> typer.Exit:
-    console.print(f"[red]{type(exc).__name__}:[/red] {exc}")
+    console.print(f"[red]{type(exc).__name__}:[/red] {exc}", soft_wrap=True)
     return typer.Exit(1)
 
 

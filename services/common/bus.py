@@ -3,7 +3,10 @@
 Zenoh invokes subscriber callbacks on its own threads; :class:`AsyncSubscription`
 hands each sample to the owning event loop with ``call_soon_threadsafe`` into a
 bounded queue (dropping the oldest sample when a slow consumer falls behind —
-these are state streams, the newest value matters).
+these are state streams, the newest value matters). Publishing follows the key's
+:func:`~services.common.keys.lane`: every sample but the high-rate streams' (pick records,
+commands, status) goes at a higher priority, in a queue of its own, so a burst of camera frames
+never fills the queue a pick's outcome waits in.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ import zenoh
 from google.protobuf.message import Message
 
 from services.common.errors import ConfigurationError, RobotCommunicationError
+from services.common.keys import Lane, lane
 from services.common.settings import ZenohSettings
 
 log = logging.getLogger("pickplace.bus")
@@ -96,7 +100,14 @@ class Bus:
     def publish(self, key: str, message: Message | bytes) -> None:
         pub = self._publishers.get(key)
         if pub is None:
-            pub = self.session.declare_publisher(key)
+            # never BLOCK: a put that waits for room on a congested link would hold the event loop,
+            # and with it the driver's ServoJ stream (the embedded cell tripped its watchdog)
+            ahead = lane(key) is Lane.AHEAD
+            pub = self.session.declare_publisher(
+                key,
+                congestion_control=zenoh.CongestionControl.DROP,
+                priority=zenoh.Priority.DATA_HIGH if ahead else zenoh.Priority.DATA,
+            )
             self._publishers[key] = pub
         payload = message if isinstance(message, bytes) else message.SerializeToString()
         pub.put(payload)

@@ -6,9 +6,28 @@ messages of ``proto/`` serialised.
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass
 
 ROOT = "pickplace"
+
+# the high-rate streams, under the cell's prefix
+JOINT_STATES = "robot/joint_states"
+CAMERA_FRAMES = "camera/rgbd"
+VISION_DEBUG_IMAGE = "vision/debug_jpeg"
+
+
+class Lane(enum.Enum):
+    """Which zenoh priority queue a key's samples wait in on a congested link (none ever blocks)."""
+
+    STREAM = enum.auto()  # a high-rate stream: a late sample is worth nothing
+    AHEAD = enum.auto()  # records, commands, state changes: a queue of their own, sent first
+
+
+def lane(key: str) -> Lane:
+    """The lane of ``key`` (``pickplace/<cell_id>/<tail>``): all but the high-rate streams go AHEAD."""
+    tail = key.split("/", 2)[-1]
+    return Lane.STREAM if tail in (JOINT_STATES, CAMERA_FRAMES, VISION_DEBUG_IMAGE) else Lane.AHEAD
 
 
 @dataclass(frozen=True)
@@ -23,7 +42,7 @@ class CellKeys:
     @property
     def joint_states(self) -> str:
         """pickplace.v1.JointState at the feedback rate."""
-        return f"{self.prefix}/robot/joint_states"
+        return f"{self.prefix}/{JOINT_STATES}"
 
     @property
     def robot_status(self) -> str:
@@ -37,7 +56,7 @@ class CellKeys:
     # camera and vision
     @property
     def camera_frames(self) -> str:
-        return f"{self.prefix}/camera/rgbd"
+        return f"{self.prefix}/{CAMERA_FRAMES}"
 
     @property
     def detected_objects(self) -> str:
@@ -45,7 +64,7 @@ class CellKeys:
 
     @property
     def vision_debug_image(self) -> str:
-        return f"{self.prefix}/vision/debug_jpeg"
+        return f"{self.prefix}/{VISION_DEBUG_IMAGE}"
 
     # task
     @property
@@ -55,6 +74,17 @@ class CellKeys:
     @property
     def pick_events(self) -> str:
         return f"{self.prefix}/task/picks"
+
+    @property
+    def pick_progress(self) -> str:
+        """pickplace.v1.PickEvent with status RUNNING: a cycle's record when it starts and at each stage it
+        reaches (its outcome goes to :attr:`pick_events`, once)."""
+        return f"{self.prefix}/task/pick_progress"
+
+    @property
+    def task_plans(self) -> str:
+        """pickplace.v1.TaskPlan: every plan the task gets from motion (tool path and planning scene)."""
+        return f"{self.prefix}/task/plans"
 
     @property
     def task_commands(self) -> str:

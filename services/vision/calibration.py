@@ -147,7 +147,7 @@ def _closed_form_X(G: list[Array], C: list[Array], backend: str) -> tuple[Array,
     if backend == "opencv":
         G_inv = [invert_transform(g) for g in G]  # eye-to-hand: base→gripper in place of gripper→base
         # not in every OpenCV build (hand_eye_backends() checks), nor in the stubs of this one
-        R, t = cv2.calibrateHandEye(  # type: ignore[attr-defined]
+        R, t = cv2.calibrateHandEye(  # type: ignore[attr-defined, unused-ignore]
             [g[:3, :3] for g in G_inv],
             [g[:3, 3] for g in G_inv],
             [c[:3, :3] for c in C],

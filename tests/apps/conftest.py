@@ -22,6 +22,7 @@ def cell_settings(tmp_path, **overrides) -> Settings:  # type: ignore[no-untyped
         },
         "task": {"detect_retry_delay_s": 0.05, "reset_scene_each_cycle": False},
         "record": {"foxglove": {"port": 0}},  # `pickplace up`'s live view on a free port, never 8765
+        "state": {"dir": str(tmp_path / "state")},  # the task's cycle journal: this test's own
     }
     return load_settings("sim", overrides=deep_merge(base, overrides))
 

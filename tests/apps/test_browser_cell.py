@@ -23,9 +23,26 @@ from tests.apps.conftest import cell_settings
 from tests.gateway.dashboard_queries import empty_selectors
 from tests.gateway.test_browser import ARTIFACTS, CHROMIUM, CHROMIUM_ARGS, CHROMIUM_INSTALLED
 
-pytestmark = [pytest.mark.integration, pytest.mark.slow]
+# a loaded machine runs the cell at half speed and some cycles fail: the waits for a pick are safety nets
+pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(900)]
 
 RUNNING_STATE = re.compile(r"^(INIT|DETECT|PLAN|APPROACH|GRASP|LIFT|REORIENT|PLACE|RELEASE|DONE|RETRY)$")
+
+
+async def expect_success_rate_of_api(shown, api: httpx.AsyncClient) -> None:  # type: ignore[no-untyped-def]
+    """The panel shows GET /metrics' success rate (above 0: a pick succeeded). Read again if a pick
+    finishing meanwhile changed it (at most twice)."""
+    from playwright.async_api import expect
+
+    for attempt in range(3):
+        rate = (await api.get("/api/v1/metrics")).json()["success_rate"]
+        assert rate is not None and rate > 0, rate
+        try:
+            await expect(shown).to_have_text(f"{100 * rate:.1f} %", timeout=10_000)
+            return
+        except AssertionError:
+            if attempt == 2:
+                raise
 
 
 async def test_operator_panel_on_pickplace_up(tmp_path):
@@ -79,16 +96,27 @@ async def test_operator_panel_on_pickplace_up(tmp_path):
                     "data-objects", re.compile(r"^[1-9]\d*$"), timeout=20_000
                 )
                 await expect(view3d).to_have_attribute("data-targets", re.compile(r"^[1-9]\d*$"))
+                # the camera's frustum, from the calibration file and the camera's pinhole
+                await expect(view3d).to_have_attribute("data-frustum", "true", timeout=20_000)
                 await expect(tid("tcp-pose")).to_have_text(re.compile(r"-?\d+\.\d .*"), timeout=10_000)
                 await expect(tid("wrist-force")).to_have_text(re.compile(r"\d+\.\d"))
                 await expect(tid("gripper")).to_have_text(re.compile(r"^(open|closed)$"))
 
                 # one real pick-and-stand: history, statistics, trend and stage bars
-                await expect(tid("history").locator("tr.ok")).to_have_count(1, timeout=150_000)
-                await expect(tid("success-rate")).to_have_text("100.0 %", timeout=10_000)
-                await expect(tid("cycle-trend")).to_have_attribute("data-points", "1", timeout=10_000)
-                await expect(tid("stage-bars")).to_have_attribute("data-bars", "1", timeout=10_000)
+                # (on a loaded machine a cycle may fail before or after it: every check allows for that)
+                await expect(tid("history").locator("tr.ok")).to_have_count(1, timeout=420_000)
+                await expect_success_rate_of_api(tid("success-rate"), api)
+                await expect(tid("cycle-trend")).to_have_attribute(
+                    "data-points", re.compile(r"^[1-9]\d*$"), timeout=10_000
+                )
+                await expect(tid("stage-bars")).to_have_attribute(
+                    "data-bars", re.compile(r"^[1-9]\d*$"), timeout=10_000
+                )
                 await page.screenshot(path=str(ARTIFACTS / "panel-picking.png"))
+                # the planned path of the current cycle (the task's plans on the bus)
+                await expect(view3d).to_have_attribute("data-plan-points", re.compile(r"^[1-9]\d*$"))
+                await expect(view3d).to_have_attribute("data-plan-cycle", re.compile(r"^\d+$"))
+                await view3d.screenshot(path=str(ARTIFACTS / "panel-3d.png"))
 
                 # camera: depth view, enlarged
                 await page.get_by_role("radio", name="depth").check()
@@ -147,7 +175,7 @@ async def test_operator_panel_on_pickplace_up(tmp_path):
                 await expect(tid("events")).to_contain_text("e-stop released")
                 # picking resumed: the next cycle runs to an outcome (the rod stands now, so vision
                 # may find none: a failed pick is an outcome too) and it reaches the history
-                await expect(picks).to_have_count(before + 1, timeout=90_000)
+                await expect(picks).to_have_count(before + 1, timeout=240_000)
                 assert not run.done()
 
                 # the live link drops: everything greys out with "stale since", and recovers by itself
