@@ -4,17 +4,13 @@ or as a false-colour depth map, encoded on demand (at the rate the dashboard ask
 from __future__ import annotations
 
 from enum import StrEnum
-from pathlib import Path
 
 import cv2
 import numpy as np
-import yaml
 from pickplace.v1 import vision_pb2
 
-from services.common.errors import ConfigurationError, InvalidInputError
-from services.common.frames import check_transform, make_transform, rpy_deg_to_matrix
+from services.common.errors import InvalidInputError
 from services.common.sensors import CameraIntrinsics, RGBDFrame
-from services.common.settings import REPO_ROOT, CalibrationSettings
 
 DEPTH_RANGE_M = (0.2, 3.0)  # depths a D435i reports reliably; the colour map spans this frame's share
 JPEG_QUALITY = 85
@@ -127,23 +123,3 @@ def frame_intrinsics(payload: bytes) -> CameraIntrinsics:
             f"camera frame without intrinsics ({k.width}x{k.height}, fx {k.fx}, fy {k.fy})"
         )
     return CameraIntrinsics(k.width, k.height, k.fx, k.fy, k.cx, k.cy, tuple(k.distortion))
-
-
-def camera_pose(cal: CalibrationSettings) -> tuple[np.ndarray | None, str]:
-    """(T_base_camera, where it comes from), as the vision service takes it: the calibration file's
-    ``T_base_camera``, else the manual pose in the settings, else none. (The gateway may not import
-    the vision service; the file's one field is read here.)"""
-    path = Path(cal.file)
-    if not path.is_absolute():
-        path = REPO_ROOT / path
-    if path.exists():
-        try:
-            data = yaml.safe_load(path.read_text())
-            T = check_transform(np.asarray(data["T_base_camera"], dtype=float), "T_base_camera")
-        except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError, InvalidInputError) as exc:
-            raise ConfigurationError(f"calibration file {path}: no valid T_base_camera ({exc})") from exc
-        return T, f"calibration file {path.name}"
-    if cal.manual_translation_m is not None and cal.manual_rpy_deg is not None:
-        R = rpy_deg_to_matrix(cal.manual_rpy_deg)
-        return make_transform(R, cal.manual_translation_m), "manual pose in settings"
-    return None, "none (no calibration file, no manual pose)"

@@ -8,11 +8,12 @@ import contextlib
 from fastapi import APIRouter, HTTPException, Response, WebSocket, WebSocketDisconnect
 from google.protobuf.message import DecodeError
 
-from gateway.camera import CameraView, camera_pose, frame_intrinsics, frame_jpeg, sensor_frame_jpeg
+from gateway.camera import CameraView, frame_intrinsics, frame_jpeg, sensor_frame_jpeg
 from gateway.contract import errors
 from gateway.deps import CellDep
 from gateway.live import encode
 from gateway.schemas import CameraInfo
+from services.common.camera_pose import load_T_base_camera
 from services.common.errors import InvalidInputError
 from services.common.settings import CONFIG_DIR
 
@@ -107,7 +108,7 @@ async def camera_info(cell: CellDep) -> CameraInfo:
             raise HTTPException(404, "no camera frame received yet (camera not publishing)")
     except (InvalidInputError, DecodeError) as exc:
         raise HTTPException(404, f"the newest camera frame has no usable intrinsics: {exc}") from exc
-    T, source = camera_pose(cell.settings.vision.calibration)
+    T, source = load_T_base_camera(cell.settings.vision.calibration)
     return CameraInfo(
         width=k.width,
         height=k.height,

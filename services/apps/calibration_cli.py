@@ -115,8 +115,7 @@ class GrpcCalibrationRobot:
 def _guess(
     settings: Settings, xyz: tuple[float, float, float] | None, rpy: tuple[float, float, float] | None
 ) -> np.ndarray:
-    from services.vision.calibration import manual_T_base_camera
-    from services.vision.service import load_T_base_camera
+    from services.common.camera_pose import load_T_base_camera, manual_T_base_camera
 
     if xyz is not None and rpy is not None:
         return manual_T_base_camera(xyz, rpy_deg=rpy)
@@ -252,7 +251,8 @@ def calibrate_manual(
     profile: ProfileOpt = None,
 ) -> None:
     """Write a measured camera pose as the calibration (seed 001's PoC path)."""
-    from services.vision.calibration import calibration_record, manual_T_base_camera, write_calibration
+    from services.common.camera_pose import manual_T_base_camera
+    from services.vision.calibration import calibration_record, write_calibration
 
     s = _settings(profile)
     try:
@@ -274,9 +274,9 @@ def calibration_check(
     profile: ProfileOpt = None,
 ) -> None:
     """Quick drift check: where the board is seen vs where the robot says it holds it. Exit 1 on drift."""
+    from services.common.camera_pose import read_calibration
     from services.common.charuco import CharucoTarget
     from services.vision.calibrate_workflow import check_calibration, generate_calibration_poses
-    from services.vision.calibration import read_calibration
 
     s = _settings(profile)
     cal = s.vision.calibration

@@ -122,8 +122,8 @@ async def serve_record(settings: Settings) -> None:
     from pickplace.v1 import robot_pb2_grpc
 
     from services.common.bus import Bus
+    from services.common.camera_pose import load_T_base_camera
     from services.common.grpc_util import cell_token, channel
-    from services.vision.service import load_T_base_camera
 
     T, _source = load_T_base_camera(settings.vision.calibration)
     ch = channel(settings.grpc.client_host("robot"), settings.grpc.robot_port, cell_token(settings))

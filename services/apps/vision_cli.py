@@ -106,10 +106,10 @@ def vision_detect(
     profile: ProfileOpt = None,
 ) -> None:
     """Detect rods, cubes and obstacles on recorded frames and print them."""
+    from services.common.camera_pose import load_T_base_camera
     from services.vision.overlay import overlay_jpeg
     from services.vision.pipeline import VisionPipeline
     from services.vision.replay import ReplayCamera
-    from services.vision.service import load_T_base_camera
 
     s = _settings(profile)
     try:

@@ -15,7 +15,7 @@ squares (scipy) on the board corners' 3D disagreement, which the closed forms
 do not minimise.
 
 Files: ``config/calibration.yaml`` holds ``T_base_camera`` with a timestamp,
-the method, the residuals and the pose count; :func:`read_calibration`
+the method, the residuals and the pose count; :func:`services.common.camera_pose.read_calibration`
 validates it on load.
 """
 
@@ -34,37 +34,12 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from services.common.errors import ConfigurationError, InvalidInputError, VisionError
-from services.common.frames import check_transform, finite_vector, invert_transform, make_transform
+from services.common.frames import check_transform, invert_transform, make_transform
 
 Array = np.ndarray
 
 CALIBRATION_FORMAT = 1
 MIN_POSES = 3
-
-
-# --- manual (seed 001 PoC) ------------------------------------------------------------------------
-def manual_T_base_camera(
-    translation_m: Sequence[float],
-    rpy_deg: Sequence[float] | None = None,
-    quat_xyzw: Sequence[float] | None = None,
-) -> Array:
-    """T_base_camera from a measured camera position (m) and orientation (fixed-XYZ rpy in degrees, or xyzw).
-
-    The orientation is of the camera's optical frame (z forward, x right, y down) in the base frame.
-    """
-    t = finite_vector(translation_m, 3, "camera translation")
-    if np.linalg.norm(t) > 5.0:
-        raise InvalidInputError(f"camera translation {t.tolist()} m is more than 5 m from the base: units?")
-    if rpy_deg is not None and quat_xyzw is None:
-        R = Rotation.from_euler("xyz", finite_vector(rpy_deg, 3, "camera rpy"), degrees=True).as_matrix()
-    elif quat_xyzw is not None and rpy_deg is None:
-        q = finite_vector(quat_xyzw, 4, "camera quaternion")
-        if abs(np.linalg.norm(q) - 1.0) > 1e-3:
-            raise InvalidInputError(f"camera quaternion must be unit length, |q| = {np.linalg.norm(q):.4f}")
-        R = Rotation.from_quat(q).as_matrix()
-    else:
-        raise InvalidInputError("give exactly one of rpy_deg or quat_xyzw for the camera orientation")
-    return check_transform(make_transform(R, t), "T_base_camera")
 
 
 # --- eye-to-hand solve --------------------------------------------------------------------------
@@ -355,37 +330,3 @@ def write_calibration(path: str | Path, record: dict[str, Any]) -> Path:
     tmp.write_text(header + yaml.safe_dump(record, sort_keys=False))
     tmp.replace(p)
     return p
-
-
-@dataclass(frozen=True)
-class CalibrationFile:
-    T_base_camera: Array
-    timestamp: dt.datetime
-    method: str
-    record: dict[str, Any]
-
-
-def read_calibration(path: str | Path) -> CalibrationFile:
-    """Load and validate a calibration file; ConfigurationError says what is wrong."""
-    p = Path(path)
-    try:
-        data = yaml.safe_load(p.read_text())
-    except FileNotFoundError as exc:
-        raise ConfigurationError(
-            f"no calibration file at {p}: run `pickplace calibrate` or set a manual pose"
-        ) from exc
-    except yaml.YAMLError as exc:
-        raise ConfigurationError(f"calibration file {p} is not valid YAML: {exc}") from exc
-    if not isinstance(data, dict) or "T_base_camera" not in data:
-        raise ConfigurationError(f"calibration file {p} has no T_base_camera")
-    try:
-        T = check_transform(np.asarray(data["T_base_camera"], dtype=float), "T_base_camera")
-    except (InvalidInputError, ValueError, TypeError) as exc:
-        raise ConfigurationError(f"calibration file {p}: {exc}") from exc
-    try:
-        stamp = dt.datetime.fromisoformat(str(data.get("timestamp")))
-    except ValueError as exc:
-        raise ConfigurationError(
-            f"calibration file {p} has no valid ISO timestamp: {data.get('timestamp')!r}"
-        ) from exc
-    return CalibrationFile(T_base_camera=T, timestamp=stamp, method=str(data.get("method", "")), record=data)

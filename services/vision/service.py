@@ -21,7 +21,6 @@ import contextlib
 import logging
 import threading
 import time
-from pathlib import Path
 from typing import Any
 
 import grpc
@@ -29,6 +28,7 @@ import numpy as np
 from pickplace.v1 import common_pb2, vision_pb2, vision_pb2_grpc
 
 from services.common.bus import Bus
+from services.common.camera_pose import load_T_base_camera
 from services.common.errors import (
     CameraConnectionError,
     ConfigurationError,
@@ -44,9 +44,8 @@ from services.common.sensors import (
     RGBDFrame,
     msg_to_frame,
 )
-from services.common.settings import REPO_ROOT, CalibrationSettings, CameraSourceSettings, Settings
+from services.common.settings import CameraSourceSettings, Settings
 from services.common.shell import GrpcShell, cell_token
-from services.vision.calibration import manual_T_base_camera, read_calibration
 from services.vision.messages import detections_msg
 from services.vision.overlay import overlay_jpeg
 from services.vision.pipeline import VisionPipeline, replace_timings
@@ -58,20 +57,6 @@ Array = np.ndarray
 
 FRAME_WAIT_S = 2.0
 CAPTURE_FAILURES_DOWN = 3  # frames missed in a row before health reports the frame source down
-
-
-def load_T_base_camera(cal: CalibrationSettings) -> tuple[Array | None, str]:
-    """(T_base_camera, where it came from): the calibration file, the manual pose, or nothing."""
-    path = Path(cal.file)
-    if not path.is_absolute():
-        path = REPO_ROOT / path
-    if path.exists():
-        return read_calibration(path).T_base_camera, f"calibration file {path}"
-    if cal.manual_translation_m is not None and cal.manual_rpy_deg is not None:
-        return manual_T_base_camera(
-            cal.manual_translation_m, rpy_deg=cal.manual_rpy_deg
-        ), "manual pose in settings"
-    return None, "none (camera-frame results only)"
 
 
 def make_camera(settings: CameraSourceSettings) -> Camera | None:

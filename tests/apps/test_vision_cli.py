@@ -13,11 +13,11 @@ from typer.testing import CliRunner
 
 from services.apps.calibration_cli import GrpcCalibrationRobot
 from services.apps.cli import app
+from services.common.camera_pose import read_calibration
 from services.common.errors import IKFailureError
 from services.common.settings import load_settings
 from services.kinematics.analytic import fk
 from services.kinematics.robot_models import get_robot
-from services.vision.calibration import read_calibration
 from services.vision.replay import record_frames
 from services.vision.synthetic import NoiseModel, render_scene
 from services.vision.synthetic_scenes import random_scene

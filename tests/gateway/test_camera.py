@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from pickplace.v1 import common_pb2, vision_pb2
 
-from gateway.camera import camera_pose
 from services.common.bus import Bus
+from services.common.camera_pose import load_T_base_camera
 from services.common.keys import CellKeys
 from tests.gateway.conftest import gateway_settings, migrate_up, running_gateway, wait_until
 
@@ -45,7 +45,7 @@ async def test_colour_depth_views_and_detections(settings, sqlite_db, tmp_path) 
         await wait_until(lambda: gw.cell.hub.frame_count >= 1, 10, "the camera frame")
         info = (await c.get("/api/v1/camera/info")).json()  # the 3D view's frustum
         assert (info["width"], info["height"], info["fx"], info["cx"]) == (64, 48, 50, 32)
-        T_file, _ = camera_pose(s.vision.calibration)
+        T_file, _ = load_T_base_camera(s.vision.calibration)
         if T_file is None:
             assert info["T_base_camera"] is None
         else:
@@ -89,18 +89,18 @@ def test_the_camera_pose_is_the_calibration_files_else_the_manual_one(tmp_path) 
     T = np.eye(4)
     T[:3, 3] = (0.9, 0.0, 0.7)
     f = tmp_path / "cal.yaml"
-    f.write_text("T_base_camera: " + str(T.tolist()) + "\n")
-    pose, source = camera_pose(CalibrationSettings(file=str(f)))
+    f.write_text("T_base_camera: " + str(T.tolist()) + "\ntimestamp: 2026-12-02T10:00:00+00:00\n")
+    pose, source = load_T_base_camera(CalibrationSettings(file=str(f)))
     assert pose is not None and np.allclose(pose, T) and "cal.yaml" in source
 
     manual = CalibrationSettings(
         file=str(tmp_path / "none.yaml"), manual_translation_m=(0.93, 0, 0.66), manual_rpy_deg=(-145.4, 0, 90)
     )
-    pose, source = camera_pose(manual)
+    pose, source = load_T_base_camera(manual)
     assert pose is not None and np.allclose(pose[:3, 3], (0.93, 0, 0.66)) and source.startswith("manual")
     assert pose[2, 2] < 0  # the optical axis looks down at the table
-    assert camera_pose(CalibrationSettings(file=str(tmp_path / "none.yaml")))[0] is None
+    assert load_T_base_camera(CalibrationSettings(file=str(tmp_path / "none.yaml")))[0] is None
 
     f.write_text("T_base_camera: [[1, 2], [3, 4]]\n")
     with pytest.raises(ConfigurationError, match=r"cal\.yaml"):
-        camera_pose(CalibrationSettings(file=str(f)))
+        load_T_base_camera(CalibrationSettings(file=str(f)))

@@ -10,6 +10,7 @@ import pytest
 import yaml
 from scipy.spatial.transform import Rotation
 
+from services.common.camera_pose import manual_T_base_camera, read_calibration
 from services.common.charuco import CharucoTarget, default_T_gripper_board
 from services.common.errors import ConfigurationError, InvalidInputError, RobotError, VisionError
 from services.common.frames import invert_transform, make_transform
@@ -24,8 +25,6 @@ from services.vision.calibration import (
     calibration_record,
     check_drift,
     hand_eye_backends,
-    manual_T_base_camera,
-    read_calibration,
     solve_eye_to_hand,
     write_calibration,
 )

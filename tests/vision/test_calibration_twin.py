@@ -16,6 +16,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from services.apps.calibration_cli import GrpcCalibrationRobot
+from services.common.camera_pose import read_calibration
 from services.common.frames import invert_transform, make_transform
 from services.common.settings import Settings
 from services.robot.service import RobotService
@@ -24,7 +25,6 @@ from services.sim.twin import ground_truth
 from services.sim.twin.calibration_board import CALIBRATION_READY_DEG, board_mount, twin_calibration_settings
 from services.sim.twin.camera import TwinCamera
 from services.vision.calibrate_workflow import run_calibration
-from services.vision.calibration import read_calibration
 from tests.sim.twin_helpers import twin_settings
 from tests.vision.test_calibration import ROT_TOL_DEG, TRANS_TOL_M, pose_error
 

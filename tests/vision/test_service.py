@@ -12,6 +12,7 @@ from pickplace.v1 import vision_pb2, vision_pb2_grpc
 from prometheus_client import CollectorRegistry
 
 from services.common.bus import Bus
+from services.common.camera_pose import load_T_base_camera
 from services.common.errors import (
     CameraConnectionError,
     ConfigurationError,
@@ -25,7 +26,7 @@ from services.common.sensors import frame_to_msg, msg_to_frame, publish_camera_f
 from services.common.settings import CameraSourceSettings
 from services.vision.realsense import RealSenseCamera
 from services.vision.replay import ReplayCamera, record_frames
-from services.vision.service import VisionService, load_T_base_camera, make_camera
+from services.vision.service import VisionService, make_camera
 from services.vision.synthetic import NoiseModel, render_scene
 from services.vision.synthetic_scenes import random_scene
 
