@@ -316,7 +316,7 @@ async def _recovery(s, sim, outages_s: tuple[float, ...] = (0.2, 1.0, 3.0), repe
     from services.common.errors import RobotCommunicationError
     from services.common.settings import ReconnectSettings
     from services.dobot import RobotMode
-    from services.robot.client import LinkEventKind, LinkState
+    from services.robot.feedback import LinkEventKind, LinkState
 
     ctl = sim.controller
     back: list[float] = []

@@ -22,15 +22,15 @@
   on the controller's clock (the packets' TimeStamp), with a generous wall-clock
   guard only against a controller whose clock has stopped.
 
-The API is SI (radians, metres, 4x4 transforms); degrees and millimetres exist
-only in the strings this module sends and parses.
+The API is SI (radians, metres, 4x4 transforms): the typed commands are
+:class:`services.robot.commands.DobotCommands`, the states it reports
+:mod:`services.robot.feedback`; degrees and millimetres exist only in the strings sent and parsed.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import enum
 import logging
 import random
 import re
@@ -38,9 +38,6 @@ import time
 from collections import Counter, deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-
-import numpy as np
-from numpy.typing import ArrayLike
 
 from services import dobot
 from services.common.errors import (
@@ -50,117 +47,19 @@ from services.common.errors import (
     RobotCommunicationError,
     TrajectoryExecutionError,
 )
-from services.common.frames import dobot_pose_to_transform, finite_vector, transform_to_dobot_pose
 from services.common.settings import ReconnectSettings
 from services.dobot import RobotMode
+from services.robot.commands import DobotCommands, raise_for_reply
+from services.robot.feedback import ClientState, FeedbackState, LinkEvent, LinkEventKind, LinkState
 from services.robot.priority_lane import PriorityLane
 
 log = logging.getLogger("pickplace.robot.client")
-
-
-def _deg(v_rad: np.ndarray) -> list[float]:
-    """Radians → degrees, as the plain floats the command codec formats."""
-    return np.rad2deg(v_rad).tolist()
-
-
-def _pose(T: np.ndarray) -> list[float]:
-    """A transform → the controller's pose (mm, degrees), as plain floats."""
-    return transform_to_dobot_pose(T).tolist()
-
-
-class LinkState(enum.Enum):
-    """The controller link as the feedback stream sees it (health reports anything but UP as down)."""
-
-    DOWN = "down"  # not yet connected, or closed
-    UP = "up"  # sound packets arriving
-    RECONNECTING = "reconnecting"  # lost; retrying for as long as the client lives
-
-
-class LinkEventKind(enum.Enum):
-    LOST = "lost"
-    RESTORED = "restored"
-    STOP_SENT = "stop sent"
-
-
-@dataclass(frozen=True)
-class LinkEvent:
-    """One change of the link, stamped on the controller's clock: a loss with the last sound packet's
-    stamp before it, a restore with the first one after it, a Stop with the newest stamp when the
-    controller accepted it."""
-
-    kind: LinkEventKind
-    epoch: int  # the link epoch after the event (each loss starts a new one)
-    stamp_ms: int | None
-    reason: str
-
 
 # A run of this many bad packets (8 ms each: 200 ms) is a link fault, not noise.
 BAD_FEEDBACK_RUN = 25
 # A request that timed out leaves a tombstone for its late reply; beyond this many the oldest go.
 MAX_TOMBSTONES = 64
 LINK_EVENTS_KEPT = 256
-
-
-class ClientState(enum.Enum):
-    IDLE = "idle"
-    CONNECTING = "connecting"
-    CONNECTED = "connected"
-    DISCONNECTED = "disconnected"
-    CLOSED = "closed"
-
-
-@dataclass(frozen=True)
-class FeedbackState:
-    """One decoded feedback packet, in SI units."""
-
-    q: np.ndarray  # rad
-    qd: np.ndarray  # rad/s
-    q_target: np.ndarray  # rad
-    T_base_tool: np.ndarray  # 4x4, m (ToolVectorActual)
-    tcp_force: np.ndarray  # N, N·m
-    robot_mode: int
-    current_command_id: int
-    digital_inputs: int
-    digital_outputs: int
-    enabled: bool
-    error: bool
-    collision: bool
-    running: bool
-    estop: bool
-    timestamp_ms: int  # controller clock
-    received_ns: int  # local time.time_ns() at receipt
-
-    @classmethod
-    def from_record(
-        cls, rec: np.ndarray, received_ns: int, prev_stamp_ms: int | None = None
-    ) -> FeedbackState:
-        """The state of one packet; ProtocolError when a value the driver uses is not finite or not
-        plausible, or the controller clock ran backwards from ``prev_stamp_ms``."""
-        fault = dobot.feedback_fault(rec, prev_stamp_ms)
-        if fault is not None:
-            raise dobot.ProtocolError(f"bad feedback packet: {fault}")
-        return cls(
-            q=np.deg2rad(np.array(rec["QActual"], dtype=float)),
-            qd=np.deg2rad(np.array(rec["QDActual"], dtype=float)),
-            q_target=np.deg2rad(np.array(rec["QTarget"], dtype=float)),
-            T_base_tool=dobot_pose_to_transform(np.array(rec["ToolVectorActual"], dtype=float)),
-            tcp_force=np.array(rec["ActualTCPForce"], dtype=float),
-            robot_mode=int(rec["RobotMode"]),
-            current_command_id=int(rec["CurrentCommandId"]),
-            digital_inputs=int(rec["DigitalInputs"]),
-            digital_outputs=int(rec["DigitalOutputs"]),
-            enabled=bool(rec["EnableStatus"]),
-            error=bool(rec["ErrorStatus"]),
-            collision=bool(rec["CollisionState"]),
-            running=bool(rec["RunningStatus"]),
-            estop=not (int(rec["SafetyState"]) & 0x01),
-            timestamp_ms=int(rec["TimeStamp"]),
-            received_ns=received_ns,
-        )
-
-    @property
-    def in_error(self) -> bool:
-        return self.robot_mode in (RobotMode.ERROR, RobotMode.COLLISION)
 
 
 def _num_key(token: str) -> str:
@@ -219,18 +118,7 @@ def _backoff(attempt: int, rs: ReconnectSettings) -> float:
     return random.uniform(cap / 2, cap)
 
 
-def _raise_for(command: str, reply: dobot.Reply) -> None:
-    """ControllerError (or EmergencyStopError) unless the reply's ErrorID is 0."""
-    if reply.error_id == dobot.ErrorID.ESTOP:
-        raise EmergencyStopError(f"{command} refused: {dobot.describe_error_id(reply.error_id)}")
-    if reply.error_id != 0:
-        raise ControllerError(
-            f"{command} refused with ErrorID {reply.error_id}: {dobot.describe_error_id(reply.error_id)}",
-            error_id=reply.error_id,
-        )
-
-
-class DobotClient:
+class DobotClient(DobotCommands):
     def __init__(
         self,
         host: str,
@@ -749,45 +637,8 @@ class DobotClient:
     async def request(self, command: str, timeout_s: float | None = None) -> dobot.Reply:
         """Send one command; raise ControllerError (or EmergencyStopError) unless ErrorID is 0."""
         reply = await self.raw_request(command, timeout_s)
-        _raise_for(command, reply)
+        raise_for_reply(command, reply)
         return reply
-
-    # ------------------------------------------------------------------ commands (SI)
-    async def enable(self, load_kg: float = 0.0) -> None:
-        await self.request(dobot.enable_robot(load_kg))
-
-    async def disable(self) -> None:
-        await self.request("DisableRobot()")
-
-    async def clear_error(self) -> None:
-        await self.request("ClearError()")
-
-    async def robot_mode(self) -> int:
-        return int((await self.request("RobotMode()")).floats()[0])
-
-    async def error_ids(self) -> list[int]:
-        reply = await self.request("GetErrorID()")
-        return dobot.parse_error_ids(reply.values_text)
-
-    async def current_command_id(self) -> int:
-        return int((await self.request("GetCurrentCommandID()")).floats()[0])
-
-    async def get_angles(self) -> np.ndarray:
-        return np.deg2rad((await self.request("GetAngle()")).floats())
-
-    async def get_pose(self) -> np.ndarray:
-        return dobot_pose_to_transform((await self.request("GetPose()")).floats())
-
-    async def speed_factor(self, ratio: int) -> None:
-        await self.request(dobot.speed_factor(ratio))
-
-    async def acceleration_ratio(self, ratio: int) -> None:
-        """AccJ and AccL at once: the acceleration percentage of MovJ / MovL without their own ``a=``."""
-        for cmd in dobot.acceleration_ratios(ratio):
-            await self.request(cmd)
-
-    async def stop(self) -> None:
-        await self.request("Stop()")
 
     async def emergency_stop(self, press: bool = True) -> None:
         """Press (or release) the controller's e-stop on the e-stop's own connection, never queued
@@ -803,87 +654,6 @@ class DobotClient:
             raise ControllerError(
                 f"EmergencyStop refused with ErrorID {reply.error_id}", error_id=reply.error_id
             )
-
-    async def positive_kin(self, q: ArrayLike) -> np.ndarray:
-        q_rad = finite_vector(q, 6, "joints")
-        return dobot_pose_to_transform((await self.request(dobot.positive_kin(_deg(q_rad)))).floats())
-
-    async def inverse_kin(self, T: np.ndarray, joint_near: ArrayLike | None = None) -> np.ndarray:
-        near = None if joint_near is None else _deg(finite_vector(joint_near, 6, "joint_near"))
-        reply = await self.request(dobot.inverse_kin(_pose(T), near))
-        return np.deg2rad(reply.floats())
-
-    async def digital_output(
-        self, index: int, on: bool, tool: bool = False, queued: bool = True
-    ) -> int | None:
-        if queued:
-            return (await self.request(dobot.digital_output(index, on, tool))).result_id
-        name = "ToolDOInstant" if tool else "DOInstant"
-        await self.request(dobot.command(name, dobot.fmt_int(index), "1" if on else "0"))
-        return None
-
-    async def digital_input(self, index: int, tool: bool = False) -> bool:
-        reply = await self.request(dobot.command("ToolDI" if tool else "DI", dobot.fmt_int(index)))
-        return bool(int(reply.floats()[0]))
-
-    async def mov_j(
-        self, q: ArrayLike, a: int | None = None, v: int | None = None, cp: int | None = None
-    ) -> int | None:
-        q_rad = finite_vector(q, 6, "joint target")
-        return (await self.request(dobot.mov_j_joint(_deg(q_rad), a, v, cp))).result_id
-
-    async def mov_j_pose(self, T: np.ndarray, a: int | None = None, v: int | None = None) -> int | None:
-        return (await self.request(dobot.mov_j_pose(_pose(T), a, v))).result_id
-
-    async def mov_l(self, q: ArrayLike, a: int | None = None, v: int | None = None) -> int | None:
-        q_rad = finite_vector(q, 6, "joint target")
-        return (await self.request(dobot.mov_l_joint(_deg(q_rad), a, v))).result_id
-
-    async def mov_l_pose(
-        self, T: np.ndarray, a: int | None = None, v: int | None = None, speed_m_s: float | None = None
-    ) -> int | None:
-        speed = None if speed_m_s is None else max(1, round(speed_m_s * 1000))
-        return (await self.request(dobot.mov_l_pose(_pose(T), a, v, speed))).result_id
-
-    async def servo_j(self, q: ArrayLike, t_s: float) -> int | None:
-        q_rad = finite_vector(q, 6, "servo target")
-        return (await self.request(dobot.servo_j(_deg(q_rad), t_s))).result_id
-
-    async def servo_j_many(self, qs: Sequence[ArrayLike], t_s: float) -> list[int | None]:
-        """ServoJ targets pipelined in one write (the controller queues them together, so none can find
-        it run dry behind another); their queue IDs. ControllerError (EmergencyStopError) at the first
-        refused, as :meth:`request`."""
-        commands = [dobot.servo_j(_deg(finite_vector(q, 6, "servo target")), t_s) for q in qs]
-        replies = await self.raw_requests(commands)
-        for command, reply in zip(commands, replies, strict=True):
-            _raise_for(command, reply)
-        return [r.result_id for r in replies]
-
-    async def rel_mov_l_tool(
-        self, offset_m_rad: ArrayLike, a: int | None = None, v: int | None = None
-    ) -> int | None:
-        o = finite_vector(offset_m_rad, 6, "offset")
-        mm_deg = [*(o[:3] * 1000.0).tolist(), *_deg(o[3:])]
-        return (await self.request(dobot.rel_mov_l_tool(mm_deg, a, v))).result_id
-
-    async def rel_mov_j_tool(
-        self, offset_m_rad: ArrayLike, a: int | None = None, v: int | None = None
-    ) -> int | None:
-        o = finite_vector(offset_m_rad, 6, "offset")
-        mm_deg = [*(o[:3] * 1000.0).tolist(), *_deg(o[3:])]
-        return (await self.request(dobot.rel_mov_j_tool(mm_deg, a, v))).result_id
-
-    async def rel_joint_mov_j(self, dq: ArrayLike, a: int | None = None, v: int | None = None) -> int | None:
-        d = finite_vector(dq, 6, "joint offsets")
-        return (await self.request(dobot.rel_joint_mov_j(_deg(d), a, v))).result_id
-
-    # ------------------------------------------------------------------ completion
-    async def describe_alarms(self) -> tuple[list[int], str]:
-        try:
-            ids = await self.error_ids()
-        except Exception as exc:  # the alarm itself matters more than why we couldn't read it
-            return [], f"(GetErrorID failed: {exc})"
-        return ids, ", ".join(f"{i}: {dobot.describe_alarm(i)}" for i in ids) or "no alarm IDs reported"
 
     async def wait_motion_done(self, result_id: int | None, timeout_s: float) -> FeedbackState:
         """Wait until the queue command ``result_id`` finished and the arm is idle; ``timeout_s`` is

@@ -36,7 +36,7 @@ from services.common.settings import Settings
 from services.dobot import RobotMode
 from services.kinematics.robot_models import RobotSpec
 from services.kinematics.trajectory import JointTrajectory
-from services.robot.client import FeedbackState, LinkState
+from services.robot.feedback import FeedbackState, LinkState
 from services.robot.gripper import DigitalOutputGripper, GripperState
 from services.robot.link import ControllerLink, PipelinedServo
 from services.robot.monitor import ClockRate, MoveMonitor, StreamMonitor

@@ -15,7 +15,7 @@ from typing import Protocol, runtime_checkable
 
 from numpy.typing import ArrayLike
 
-from services.robot.client import ClientState, FeedbackState, LinkState
+from services.robot.feedback import ClientState, FeedbackState, LinkState
 
 FeedbackListener = Callable[[FeedbackState], None]
 

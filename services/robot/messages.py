@@ -9,7 +9,7 @@ from pickplace.v1 import common_pb2, robot_pb2
 from services.common.messages import matrix_to_pose
 from services.dobot import RobotMode
 from services.kinematics.robot_models import RobotSpec
-from services.robot.client import FeedbackState
+from services.robot.feedback import FeedbackState
 
 
 def joint_state_msg(fb: FeedbackState, spec: RobotSpec, seq: int = 0) -> common_pb2.JointState:

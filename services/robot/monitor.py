@@ -29,7 +29,7 @@ import numpy as np
 
 from services.common.errors import ExecutionError
 from services.dobot import RobotMode
-from services.robot.client import FeedbackState
+from services.robot.feedback import FeedbackState
 
 LAG_TARGETS = 2  # periods of tracking lag the path check allows (a servo trails its reference)
 

@@ -29,8 +29,9 @@ from services.common.shell import GrpcShell, cell_token
 from services.kinematics.robot_models import get_robot
 from services.kinematics.tool import tool_frame
 from services.kinematics.trajectory import JointTrajectory
-from services.robot.client import ClientState, DobotClient, FeedbackState, LinkState
+from services.robot.client import DobotClient
 from services.robot.driver import RobotDriver
+from services.robot.feedback import ClientState, FeedbackState, LinkState
 from services.robot.link import ControllerLink
 from services.robot.messages import joint_state_msg, robot_status_msg
 from services.robot.safety import cap_ratio, speed_ratio_field

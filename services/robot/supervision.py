@@ -18,7 +18,7 @@ import numpy as np
 
 from services.common.errors import ExecutionError
 from services.common.settings import Settings
-from services.robot.client import FeedbackState
+from services.robot.feedback import FeedbackState
 from services.robot.link import ControllerLink
 from services.robot.monitor import ClockRate, MoveMonitor, StreamMonitor, goal_deviation
 

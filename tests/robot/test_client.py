@@ -11,7 +11,8 @@ import pytest
 from services.common.errors import ControllerError, EmergencyStopError, RobotCommunicationError
 from services.common.settings import ReconnectSettings
 from services.dobot import RobotMode
-from services.robot.client import ClientState, DobotClient, LinkEventKind, LinkState
+from services.robot.client import DobotClient
+from services.robot.feedback import ClientState, LinkEventKind, LinkState
 from tests.conftest import HOME
 
 pytestmark = pytest.mark.integration

@@ -9,7 +9,8 @@ import pytest
 
 from services.common.settings import GripperSettings
 from services.kinematics.robot_models import NOVA5
-from services.robot.client import DobotClient, FeedbackState
+from services.robot.client import DobotClient
+from services.robot.feedback import FeedbackState
 from services.robot.gripper import EMPTY_CLOSE_FACTOR, DigitalOutputGripper
 from services.sim.controller import SimController
 from services.sim.dobot_server import SimDobotServer

@@ -17,7 +17,8 @@ from services import dobot
 from services.common.errors import RobotCommunicationError
 from services.common.settings import ReconnectSettings
 from services.dobot import RobotMode
-from services.robot.client import DobotClient, FeedbackState, LinkEventKind, LinkState
+from services.robot.client import DobotClient
+from services.robot.feedback import FeedbackState, LinkEventKind, LinkState
 
 pytestmark = pytest.mark.integration
 

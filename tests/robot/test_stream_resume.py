@@ -21,8 +21,8 @@ from services.dobot import RobotMode
 from services.kinematics.interpolation import quintic_move
 from services.kinematics.robot_models import NOVA5
 from services.kinematics.trajectory import JointLimits
-from services.robot.client import FeedbackState
 from services.robot.driver import RobotDriver
+from services.robot.feedback import FeedbackState
 from services.robot.monitor import StreamMonitor
 from services.robot.resume import retime_from_rest, warp
 from services.robot.safety import SafetyLimits

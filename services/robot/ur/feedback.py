@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from services.dobot import RobotMode
-from services.robot.client import FeedbackState
+from services.robot.feedback import FeedbackState
 from services.rtde.codes import RuntimeState, SafetyMode, SafetyStatusBit, URRobotMode
 from services.rtde.poses import pose_to_transform
 

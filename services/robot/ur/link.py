@@ -46,7 +46,7 @@ from services.common.errors import (
 from services.common.settings.robot import ReconnectSettings
 from services.dobot import RobotMode
 from services.kinematics.robot_models import RobotSpec
-from services.robot.client import ClientState, FeedbackState, LinkState
+from services.robot.feedback import ClientState, FeedbackState, LinkState
 from services.robot.ur import rtde_api
 from services.robot.ur.feedback import URSample, describe, to_feedback
 from services.robot.ur.io_client import RTDEOutputs

@@ -9,7 +9,7 @@ import contextlib
 from collections.abc import Callable
 
 from services.common.errors import RobotCommunicationError
-from services.robot.client import ClientState, FeedbackState, LinkState
+from services.robot.feedback import ClientState, FeedbackState, LinkState
 from services.robot.link import FeedbackListener
 
 WALL_GUARD_MIN_S = 30.0  # a controller-clock wait also ends after this much wall time (+20x its length)

@@ -22,8 +22,8 @@ from services.common.settings import Settings, load_settings
 from services.common.settings.robot import RobotDriverKind
 from services.dobot import RobotMode
 from services.kinematics.interpolation import quintic_move
-from services.robot.client import LinkState
 from services.robot.driver import RobotDriver
+from services.robot.feedback import LinkState
 from services.robot.service import build_driver
 from services.robot.ur.link import URLink
 from services.sim.ur.controller import URControllerConfig
