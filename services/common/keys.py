@@ -90,6 +90,13 @@ class CellKeys:
     def task_commands(self) -> str:
         return f"{self.prefix}/task/commands"
 
+    # the simulated cell (its own process)
+    @property
+    def sim_scene_reset(self) -> str:
+        """A Zenoh query: lay out a fresh seeded scene (payload ``{"seed": n}`` or empty for the next);
+        the reply ``{"seed": n}`` comes once frames show it."""
+        return f"{self.prefix}/sim/reset_scene"
+
     # configuration
     @property
     def config_updates(self) -> str:

@@ -7,7 +7,7 @@ sim-dobot process, so that process
 
 - publishes the simulated RealSense frames on ``CellKeys.camera_frames`` (the vision
   service's ``vision.camera.source: bus`` consumes them), and
-- answers a Zenoh query on :func:`scene_reset_key`: lay out a fresh seeded scene (the
+- answers a Zenoh query on :attr:`CellKeys.sim_scene_reset`: lay out a fresh seeded scene (the
   simulated operator lays the rod down again) with the arm where it is, then reply with
   the new seed — so a caller knows frames published after the reply show the new scene.
 """
@@ -37,10 +37,6 @@ if TYPE_CHECKING:
 log = logging.getLogger("pickplace.sim.bus")
 
 RESET_TIMEOUT_S = 30.0
-
-
-def scene_reset_key(cell_id: str) -> str:
-    return f"{CellKeys(cell_id).prefix}/sim/reset_scene"
 
 
 class CurrentCamera:
@@ -133,14 +129,14 @@ class SimBusLink(ServiceShell):
                 ),
                 "frames",
             )
-        queryable = self.bus.session.declare_queryable(scene_reset_key(self.settings.cell_id), self._on_query)
+        queryable = self.bus.session.declare_queryable(keys.sim_scene_reset, self._on_query)
         stack.callback(self._undeclare, queryable)
         self.follow_config(self.bus, self.settings, self._on_config)
         log.info(
             "sim on zenoh: frames %s on %s, scene reset on %s",
             "published" if self.frames else "off",
             keys.camera_frames,
-            scene_reset_key(self.settings.cell_id),
+            keys.sim_scene_reset,
         )
 
     @staticmethod
@@ -200,7 +196,7 @@ async def request_scene_reset(
 ) -> int:
     """Ask the sim-dobot process for a fresh scene; returns its seed once the new scene is live."""
     payload = b"" if seed is None else json.dumps({"seed": seed}).encode()
-    key = scene_reset_key(cell_id)
+    key = CellKeys(cell_id).sim_scene_reset
 
     def ask() -> int:
         replies = bus.session.get(key, payload=payload, timeout=timeout_s)
