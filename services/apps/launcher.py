@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+import yaml
 
 from services.apps.cycles import drive_cycles
 from services.apps.probes import accepts_connections, check_health, serve_metrics_dir
@@ -41,6 +42,7 @@ from services.apps.topology import (
     ProcessSpec,
     child_view,
     pickplace_program,
+    settings_layer,
     topology,
 )
 from services.common.aio import run_until_signal
@@ -405,6 +407,17 @@ def session_log(settings: Settings, kind: str) -> Iterator[Path | None]:
 
 
 # ---------------------------------------------------------------------------- `pickplace up --processes`
+def write_settings_layer(settings: Settings, path: Path) -> Path:
+    """The launcher's settings for its children (:func:`settings_layer`), written atomically, owner-only."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w") as f:
+        yaml.safe_dump(settings_layer(settings), f, sort_keys=False)
+    os.replace(tmp, path)
+    return path
+
+
 async def run_processes(
     settings: Settings,
     cycles: int = 0,
@@ -427,6 +440,7 @@ async def run_processes(
     )
     settings = with_state_dir(settings)
     var = settings.state.path(settings.cell_id, REPO_ROOT)  # this cell's own: never another cell's files
+    settings_file = write_settings_layer(settings, var / "settings.yaml")
     specs = topology(
         settings,
         ports,
@@ -435,6 +449,7 @@ async def run_processes(
         log_dir=var / "log" / "processes",
         state_dir=var / "gateway",
         task_state_dir=var,  # the task's cycle journal: a cycle cut by a crash is recorded on restart
+        settings_file=settings_file,  # the children run with the launcher's settings, not the profile's
     )
 
     def show(ev: LauncherEvent) -> None:

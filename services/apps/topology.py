@@ -11,7 +11,7 @@ from pathlib import Path
 
 from services.common.errors import ConfigurationError
 from services.common.net import free_loopback_ports
-from services.common.settings import Settings
+from services.common.settings import CONFIG_FILE_ENV, Settings
 
 # Start order: the simulated controller first (the robot driver connects to it), the gateway last.
 SERVICES = ("sim-dobot", "robot", "motion", "grasp", "vision", "task", "gateway")
@@ -35,9 +35,10 @@ CONTAINER_ONLY_ENV = frozenset(
         *(f"PICKPLACE_GRPC__{s.upper()}_HOST" for s in GRPC_SERVICES),
     }
 )
-# Names only the local run sets: a per-process log file, a throw-away PostgreSQL schema (tests).
+# Names only the local run sets: a per-process log file, a throw-away PostgreSQL schema (tests), the
+# launcher's own settings as every child's config file.
 LOCAL_ONLY_ENV = frozenset(
-    {"PICKPLACE_LOGGING__FILE", "PICKPLACE_DATABASE__SCHEMA_NAME", "PICKPLACE_STATE__DIR"}
+    {"PICKPLACE_LOGGING__FILE", "PICKPLACE_DATABASE__SCHEMA_NAME", "PICKPLACE_STATE__DIR", CONFIG_FILE_ENV}
 )
 
 DEFAULT_METRICS_PORTS = {
@@ -149,6 +150,18 @@ def service_args(name: str) -> tuple[str, ...]:
     return ("serve", name)
 
 
+def settings_layer(settings: Settings) -> dict[str, object]:
+    """The launcher's resolved settings as a config file for its children (``PICKPLACE_CONFIG_FILE``), so
+    each child runs with what the launcher was given — its ``-c`` file, ``--task``, ``--seed`` and the
+    ``PICKPLACE_*`` variables of its shell — and not only the profile; what the topology sets in a
+    child's environment (ports, files) still wins. The profile is each child's own variable, the token
+    travels in the environment (never on disk), and a log file or metrics port is each process's own."""
+    return settings.model_dump(
+        mode="json",
+        exclude={"profile": True, "gateway": {"api_token"}, "logging": {"file"}, "metrics": {"port"}},
+    )
+
+
 def topology(
     settings: Settings,
     ports: LocalPorts,
@@ -160,6 +173,7 @@ def topology(
     seed: int | None = None,
     state_dir: Path | None = None,
     task_state_dir: Path | None = None,
+    settings_file: Path | None = None,
 ) -> list[ProcessSpec]:
     """The child processes of the local run, in start order (pure: no I/O); the recorder last when
     ``record.dir`` is set."""
@@ -171,6 +185,7 @@ def topology(
         "PICKPLACE_ZENOH__LISTEN": "[]",
         "PICKPLACE_ZENOH__CONNECT": json.dumps([f"tcp/127.0.0.1:{ports.zenoh}"]),
         **{f"PICKPLACE_GRPC__{name.upper()}_PORT": str(port) for name, port in ports.grpc.items()},
+        **({CONFIG_FILE_ENV: str(settings_file)} if settings_file is not None else {}),
     }
     specific: dict[str, dict[str, str]] = {
         "sim-dobot": {
