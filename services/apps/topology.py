@@ -12,6 +12,7 @@ from pathlib import Path
 from services.common.errors import ConfigurationError
 from services.common.net import free_loopback_ports
 from services.common.settings import CONFIG_FILE_ENV, Settings
+from services.common.settings.robot import RobotDriverKind
 
 # Start order: the simulated controller first (the robot driver connects to it), the gateway last.
 SERVICES = ("sim-dobot", "robot", "motion", "grasp", "vision", "task", "gateway")
@@ -177,6 +178,12 @@ def topology(
 ) -> list[ProcessSpec]:
     """The child processes of the local run, in start order (pure: no I/O); the recorder last when
     ``record.dir`` is set."""
+    if settings.robot.driver is not RobotDriverKind.DOBOT:
+        raise ConfigurationError(
+            f"the multi-process cell runs the simulated Dobot (sim-dobot); robot.driver "
+            f"{settings.robot.driver.value} ({settings.robot.model}) is not wired into it yet: run a UR cell "
+            "in one process (`pickplace up`, `pickplace eval --robot ur5e`)"
+        )
     ports.check()
     common = {
         "PICKPLACE_PROFILE": settings.profile,

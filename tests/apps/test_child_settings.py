@@ -76,3 +76,11 @@ def test_without_a_settings_file_a_child_runs_on_its_profile(
     for name, value in robot.env.items():
         monkeypatch.setenv(name, value)
     assert load_settings().robot.speed_ratio == load_settings("sim").robot.speed_ratio != 37
+
+
+def test_a_ur_cell_is_refused_with_a_clear_error() -> None:
+    from services.common.errors import ConfigurationError
+
+    ur = load_settings("sim", overrides={"robot": {"model": "ur5e", "driver": "ur_rtde"}})
+    with pytest.raises(ConfigurationError, match=r"ur_rtde \(ur5e\).*pickplace up"):
+        topology(ur, LocalPorts.free(), api_token=TOKEN)
