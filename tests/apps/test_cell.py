@@ -17,7 +17,7 @@ from services.common.modes import TaskKind
 from services.sim.twin import ground_truth as gt
 from services.task.cycle import Orchestrator
 from services.task.ports import Observation, SeenRod
-from services.task.service import cycle_config
+from services.task.runner import cycle_config
 from services.task.states import CycleState
 from tests.apps.conftest import cell_settings
 from tests.conftest import free_port

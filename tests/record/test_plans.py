@@ -17,7 +17,7 @@ from services.kinematics.robot_models import get_robot
 from services.kinematics.tool import tool_frame
 from services.kinematics.trajectory import JointTrajectory
 from services.task.ports import Move, SeenBox
-from services.task.service import PublishedPlans
+from services.task.runner import PublishedPlans
 
 NAMES = tuple(f"joint{i + 1}" for i in range(6))
 Q_START = np.deg2rad([0.0, 0.0, 90.0, 0.0, -90.0, 0.0])
@@ -93,7 +93,7 @@ async def test_a_plan_that_cannot_be_published_still_reaches_the_cycle(
 
     motion = Motion(Q_START + 0.1)
     plans = PublishedPlans(motion, s, broken)
-    with caplog.at_level(logging.WARNING, logger="pickplace.task.service"):
+    with caplog.at_level(logging.WARNING, logger="pickplace.task.runner"):
         planned = await plans.plan_moves(Q_START, [Move(MotionKind.JOINT, Q_START + 0.1, label="A")], ())
     assert motion.calls == 1 and planned[0] is not None
     np.testing.assert_allclose(planned[0].positions[-1], Q_START + 0.1)

@@ -27,7 +27,7 @@ from services.kinematics.trajectory import JointTrajectory
 from services.task.cycle import Orchestrator
 from services.task.journal import CycleJournal
 from services.task.ports import MoveOutcome
-from services.task.service import TaskRunner
+from services.task.runner import TaskRunner
 from tests.task.fakes import HOME, FakeCell, FakeRobot, FakeVision, Fault, rod_at, seen
 
 RUNNING, SUCCEEDED = task_pb2.PICK_STATUS_RUNNING, task_pb2.PICK_STATUS_SUCCEEDED

@@ -10,7 +10,7 @@ from services.common.settings import Settings
 from services.kinematics import analytic
 from services.kinematics.robot_models import get_robot
 from services.kinematics.tool import tool_frame
-from services.task.service import view_check
+from services.task.runner import view_check
 from services.task.view import CameraModel, convex_hull, convex_overlap
 
 CAM = CameraModel.look_at((0.93, 0.0, 0.66), (0.475, 0.0, 0.0), 42.5, 640, 480)
