@@ -88,18 +88,22 @@ async def test_detect_failed_retries_with_doubling_waits_then_aborts_without_mov
     assert cell.robot.commands == [("recover",)]  # nothing moved
 
 
+# a detection that failed once, retried, then planned
+DETECT_RETRIED_THEN_PLANNED = [
+    CycleState.INIT,
+    CycleState.DETECT,
+    CycleState.DETECT_FAILED,
+    CycleState.RETRY,
+    CycleState.DETECT,
+    CycleState.PLAN,
+]
+
+
 async def test_a_camera_hiccup_is_retried_and_the_cycle_goes_on() -> None:
     cell = FakeCell(FakeVision(CameraConnectionError("vision restarting"), seen(rod_at(0.5, 0.1))))
     outcome = await cell.run()
     assert outcome.success and outcome.attempts == 1
-    assert cell.states[:6] == [
-        CycleState.INIT,
-        CycleState.DETECT,
-        CycleState.DETECT_FAILED,
-        CycleState.RETRY,
-        CycleState.DETECT,
-        CycleState.PLAN,
-    ]
+    assert cell.states[:6] == DETECT_RETRIED_THEN_PLANNED
     assert cell.wait.waits == [0.5]
 
 
@@ -118,14 +122,7 @@ async def test_a_detection_past_its_deadline_is_looked_at_again_not_given_up() -
     cell = FakeCell(HangingOnceVision(seen(rod_at(0.5, 0.1))), config=config)
     outcome = await cell.run()
     assert outcome.success and outcome.attempts == 1
-    assert cell.states[:6] == [
-        CycleState.INIT,
-        CycleState.DETECT,
-        CycleState.DETECT_FAILED,
-        CycleState.RETRY,
-        CycleState.DETECT,
-        CycleState.PLAN,
-    ]
+    assert cell.states[:6] == DETECT_RETRIED_THEN_PLANNED
     assert "detection did not finish" in cell.messages[cell.states.index(CycleState.DETECT_FAILED)]
     assert cell.vision.calls == 2
 
