@@ -54,8 +54,8 @@ bench: install wrk
 # table, JSON under var/eval/ and the wall time (hours on 2 cores; not part of `make test` or CI).
 # EVAL_SPEED asks the twin for that many x real time; it slows its clock when the machine cannot keep
 # it (the report says the speed achieved). 2 is what this 2-core machine keeps: at 3-4x the driver's
-# ServoJ feed fell behind the controller (24 streams in 4 trials at 3x, none at 2x) and each such stream
-# was re-timed from rest, so the arm no longer moved as planned.
+# ServoJ feed fell behind the controller far more often (24 streams re-timed from rest in 4 trials at
+# 3x; 556 in 1,000 trials at 2x, which took 93 min) and a re-timed stream no longer moves as planned.
 EVAL_SPEED ?= 2
 eval-long: install
 	@mkdir -p var/eval
