@@ -12,8 +12,9 @@ from services.common.sensors import CameraIntrinsics, RGBDFrame
 from services.common.settings import Settings
 from services.sim.twin.camera import TwinCamera
 from services.sim.twin.engine import TwinEngine
-from services.sim.twin.ur_cell import EngineTruth, TruthQuery, create_ur_twin_engine
+from services.sim.twin.ur_cell import EngineTruth, create_ur_twin_engine
 from services.sim.ur.controller import URController
+from services.sim.ur.truth import TruthQuery
 
 log = logging.getLogger("pickplace.sim.ur.twin")
 
