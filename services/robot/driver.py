@@ -63,7 +63,17 @@ RESUME_MARGIN_S = 0.05
 # (controller time): a loaded host (or a simulator slowed with it) learns its own latency
 SEND_LAGS_KEPT = 64
 LAG_FACTOR = 2.0
-MAX_WINDOW = 16  # the most targets held ahead, however slow the host (0.48 s at 30 ms)
+MAX_WINDOW = 16  # the most targets held ahead at 1x, however slow the host (0.48 s at 30 ms) ...
+# ... and at N x as many: the host's stalls are in its own time, so a simulator at 2x holds 0.96 s of its
+# clock (0.48 s of the host's) and its learned margin (twice a stall, in controller time) still fits
+
+
+def stream_window(base: int, rate: float, margin_ms: float, period_s: float) -> int:
+    """How many ServoJ targets to keep in hand: ``base`` (scaled by the controller's clock ``rate``), or
+    enough to hold twice the send ``margin_ms`` (controller time), at most ``MAX_WINDOW`` of host time.
+    A margin the window could not hold would turn every at-speed stream into a stop and a resume."""
+    cap = round(MAX_WINDOW * max(1.0, rate))
+    return min(cap, max(base, round(base * rate), ceil(2 * margin_ms / (1000 * period_s))))
 
 
 @dataclass(frozen=True)
@@ -460,10 +470,7 @@ class RobotDriver(Supervision):
                 held = monitor.unstarted(fb.current_command_id)
                 # the margin the host needs, and enough targets in hand to keep it
                 margin_ms = self._send_margin_ms()
-                window = min(
-                    MAX_WINDOW,
-                    max(base, round(base * self.clock_rate.rate), ceil(2 * margin_ms / (1000 * period))),
-                )
+                window = stream_window(base, self.clock_rate.rate, margin_ms, period)
                 if via_rest:
                     if held == 0 and fb.robot_mode != RobotMode.RUNNING:  # at rest at the last target
                         targets = np.vstack([targets[:k], self._resume(monitor, targets[k:], period, k)])

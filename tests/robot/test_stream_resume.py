@@ -21,7 +21,7 @@ from services.dobot import RobotMode
 from services.kinematics.interpolation import quintic_move
 from services.kinematics.robot_models import NOVA5
 from services.kinematics.trajectory import JointLimits
-from services.robot.driver import RobotDriver
+from services.robot.driver import MAX_WINDOW, RobotDriver, stream_window
 from services.robot.feedback import FeedbackState
 from services.robot.monitor import StreamMonitor
 from services.robot.resume import retime_from_rest, warp
@@ -71,6 +71,17 @@ def test_a_stream_too_short_to_reach_its_plan_says_so():
     k = len(targets) // 2  # two targets left of a stream that goes on at speed (a continuing one)
     res = retime_from_rest(targets[k - 1], targets[k : k + 2], PERIOD, LIMITS)
     assert not res.reaches_plan and np.array_equal(res.targets[-1], targets[k + 1])
+
+
+def test_the_window_holds_the_learned_margin_in_host_time_at_any_simulator_speed():
+    # a 130 ms stall of the host at 2x: 260 ms of the controller's clock, a margin of 520 ms
+    margin_ms = 2.0 * 130.0 * 2.0
+    window = stream_window(4, 2.0, margin_ms, PERIOD)
+    assert window * PERIOD * 1000 >= margin_ms  # 16 targets (480 ms) could never keep it
+    assert window <= 2 * MAX_WINDOW
+    # a real cell (1x) holds no more than it did, however slow the host
+    assert stream_window(4, 1.0, 5000.0, PERIOD) == MAX_WINDOW
+    assert stream_window(4, 1.0, 0.0, PERIOD) == 4  # a quiet host: the configured look-ahead
 
 
 def _fb(stamp_ms: int, current_id: int, mode: RobotMode = RobotMode.RUNNING) -> FeedbackState:
