@@ -11,14 +11,14 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import AsyncIterator, Callable, Iterator
+from collections.abc import AsyncIterator, Iterator
 
 import grpc
 import numpy as np
 from pickplace.v1 import common_pb2, robot_pb2, robot_pb2_grpc
 
 from services.common.bus import Bus
-from services.common.errors import ConfigurationError, InvalidInputError
+from services.common.errors import ConfigurationError
 from services.common.frames import finite_vector
 from services.common.keys import CellKeys
 from services.common.live_config import LiveConfig
@@ -32,6 +32,7 @@ from services.kinematics.trajectory import JointTrajectory
 from services.robot.client import DobotClient
 from services.robot.driver import RobotDriver
 from services.robot.feedback import ClientState, FeedbackState, LinkState
+from services.robot.guard import force_drop_condition
 from services.robot.link import ControllerLink
 from services.robot.messages import joint_state_msg, robot_status_msg
 from services.robot.safety import cap_ratio, speed_ratio_field
@@ -40,7 +41,6 @@ from services.robot.ur.link import URLink
 log = logging.getLogger("pickplace.robot.service")
 
 STREAM_QUEUE = 256
-GUARD_DEBOUNCE_PACKETS = 3  # 24 ms of sustained force change = touch-down
 GUARD_BASELINE_PACKETS = 25  # 0.2 s at the 8 ms feedback period: let the arm settle, average the noise
 FEEDBACK_STALE_TIMEOUTS = 5  # as DobotClient: a stream silent this many feedback timeouts is gone
 
@@ -221,29 +221,6 @@ class RobotControllerServicer(robot_pb2_grpc.RobotControllerServicer):
     ) -> common_pb2.CommandResponse:
         await self.driver.disable()
         return common_pb2.CommandResponse(success=True, message="disabled")
-
-
-def force_drop_condition(
-    baseline_wrench: np.ndarray, drop_n: float, direction: list[float]
-) -> Callable[[FeedbackState], bool]:
-    """Stop condition of a guarded move: the force along ``direction`` fell by ``drop_n``."""
-    d = finite_vector(direction or [0.0, 0.0, -1.0], 3, "force guard direction")
-    norm = float(np.linalg.norm(d))
-    if norm < 1e-9 or not np.isfinite(drop_n) or drop_n <= 0:
-        raise InvalidInputError(
-            f"force guard needs a direction and a positive force drop, got {direction}, {drop_n}"
-        )
-    d = d / norm
-    start = float(np.dot(baseline_wrench[:3], d))
-    run = 0
-
-    def fired(fb: FeedbackState) -> bool:
-        # debounced: a contact holds for several packets, a jolt of the arm does not
-        nonlocal run
-        run = run + 1 if start - float(np.dot(fb.tcp_force[:3], d)) > drop_n else 0
-        return run >= GUARD_DEBOUNCE_PACKETS
-
-    return fired
 
 
 def build_driver(settings: Settings) -> RobotDriver:
