@@ -21,7 +21,6 @@ import logging
 import time
 import uuid
 from collections.abc import Awaitable, Callable
-from dataclasses import dataclass, field, replace
 from typing import TypeVar, cast
 
 import numpy as np
@@ -37,43 +36,32 @@ from services.common.errors import (
 )
 from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.kinematics.trajectory import JointTrajectory
+from services.task.cycle_config import CycleConfig
 from services.task.deadline import within
 from services.task.moves import (
-    blends,
-    box_around,
     ends_in_motion,
     is_last_of,
     move_to,
-    object_id,
-    park_pose,
     placed_box,
-    pose_list,
     raised,
     run_end,
-    safe_home_of,
     starts_in_motion,
-    with_way_home,
-    without_safe_home,
 )
-from services.task.pacing import paced_on_line
-from services.task.placement import free_place_xy, place_candidates
+from services.task.pick_planning import RESUME_TOLERANCE_RAD, PickPlanning, near
 from services.task.plan import state_for
 from services.task.planned import PlannedPick, Progress
 from services.task.ports import (
     ArmView,
-    GraspPlan,
     GraspPort,
     MotionPort,
     Move,
     Observation,
-    PlannedWaypoint,
     RobotPort,
-    SeenBox,
     VisionPort,
 )
 from services.task.recording import RecordingRobot
-from services.task.recovery import Action, Attempts, RetryLimits, decide
-from services.task.states import CycleState, PickOutcome, StateDeadlines
+from services.task.recovery import Action, Attempts, decide
+from services.task.states import CycleState, PickOutcome
 
 log = logging.getLogger("pickplace.task.cycle")
 
@@ -81,22 +69,6 @@ T = TypeVar("T")
 
 StateListener = Callable[[CycleState, str], None]
 Wait = Callable[[float], Awaitable[None]]
-RESUME_TOLERANCE_RAD = np.deg2rad(0.5)
-OBJECT_MARGIN_M = 0.0  # the motion scene pads every box already (motion.padding_m)
-
-
-@dataclass(frozen=True)
-class CycleConfig:
-    limits: RetryLimits = field(default_factory=RetryLimits)
-    deadlines: StateDeadlines = field(default_factory=StateDeadlines)
-    detect_retry_delay_s: float = 0.5
-    verify_grasp: bool = True  # check the gripper's object signal after LIFT
-    place_xy: tuple[float, float] | None = (0.45, 0.0)  # None: the grasp service's configured spot
-    place_region_min: tuple[float, float] = (0.35, -0.25)
-    place_region_max: tuple[float, float] = (0.60, 0.25)
-    place_clearance_m: float = 0.06
-    grasp_offsets_m: tuple[float, ...] = (0.0, 0.035, -0.035, 0.055, -0.055, 0.075, -0.075)
-    home_joints: tuple[float, ...] | None = None  # rad; each cycle starts here (clear camera view)
 
 
 class CycleAborted(Exception):
@@ -127,8 +99,8 @@ class Orchestrator:
         self._outcome: PickOutcome | None = None
         self._stage_t0: tuple[float, float] | None = None  # (clock, wall) at entry; None between cycles
         self._progress = Progress()
-        # the arm against the camera's view of the pick zone (None: only the safe home leaves it clear)
-        self._view = view
+        # the grasp and motion planners, and the arm against the camera's view of the pick zone
+        self._planning = PickPlanning(grasp, motion, self.config, view)
 
     # ------------------------------------------------------------------ bookkeeping
     @property
@@ -329,115 +301,7 @@ class Orchestrator:
         self, task: TaskKind, obs: Observation, out: PickOutcome, alternative: int
     ) -> PlannedPick:
         q = await self.robot.joints()
-        # everything on the table that is not the target is an obstacle for the carried object too
-        target_cube = obs.cubes[0] if task is TaskKind.SORT_CUBES and obs.cubes else None
-        obstacles = (
-            self._not_the_arm(obs.obstacles, q)
-            + tuple(
-                box_around(c.centroid, c.size / 2 + OBJECT_MARGIN_M)
-                for c in obs.cubes
-                if c is not target_cube
-            )
-            + tuple(box_around(r.center, r.length / 2 + OBJECT_MARGIN_M) for r in obs.rods[1:])
-        )
-        if task is TaskKind.STAND_ROD:
-            rod = obs.rods[0]
-            place = None
-            if self.config.place_xy is not None:
-                cands = place_candidates(
-                    np.asarray(self.config.place_xy),
-                    np.asarray(self.config.place_region_min),
-                    np.asarray(self.config.place_region_max),
-                )
-                place = free_place_xy(replace(obs, obstacles=obstacles), cands, self.config.place_clearance_m)
-                if place is None:
-                    raise PlanningError(
-                        f"no free spot to stand the rod near {self.config.place_xy} "
-                        f"({len(cands)} candidates, clearance {self.config.place_clearance_m} m)"
-                    )
-            # recovery options: grasp the rod at other points along it (a neighbour may block the
-            # fingers at its centre; the twin notes show ±50 mm off-centre still stands the rod, and
-            # ±75 mm (pads 14 mm inside the end) was seen to stand it in eval)
-            offsets = self.config.grasp_offsets_m
-            offset = offsets[alternative % len(offsets)]
-            plan = await self.grasp.plan_rod(rod, q, obstacles, alternative // len(offsets), place, offset)
-            out.object_id = object_id(rod)
-        else:
-            cube = obs.cubes[0]
-            plan = await self.grasp.plan_cube(cube, q, obstacles, alternative)
-            out.object_class = f"cube_{cube.color}"
-            out.object_id = f"cube@{cube.centroid[0]:.3f},{cube.centroid[1]:.3f}"
-        out.grasp_quality = plan.quality
-        grasp_wp = next((w for w in plan.waypoints if w.gripper is GripperCommand.CLOSE), plan.waypoints[0])
-        out.pick_pose = pose_list(grasp_wp.T_base_tool)
-        out.place_pose = [*map(float, plan.place_position), 0.0, 0.0, 0.0, 1.0]
-        home = safe_home_of(plan)
-        if home is not None and not _near(q, home) and self._clear(q):
-            plan = without_safe_home(plan)  # out of the camera's view already: straight to the pre-grasp
-        if home is not None:
-            # back only as far as the first pose that leaves the camera's view clear for the next look
-            end = plan.waypoints[-1].joints
-            park = park_pose(end, home, self._clear) if self._view is not None else home
-            plan = with_way_home(plan, park)
-        # the arm sets off as soon as the moves to its first stop are planned; the rest up to the
-        # touch-down plans meanwhile (and what follows a touch-down plans from where it touched)
-        n = len(plan.waypoints)
-        first_stop = next(
-            (i for i in range(n) if move_to(plan, i) is not None and not blends(plan, i)), n - 1
-        )
-        trajs = await self._motions(plan, range(first_stop + 1), q, obstacles)
-        planned = PlannedPick(plan, trajs, obstacles, rest_from=n, home=home)
-        if first_stop + 1 < n:
-            guarded = next(
-                (i for i in range(first_stop + 1, n) if plan.waypoints[i].guard_force_n > 0), n - 1
-            )
-            q_stop = next((t.positions[-1] for t in reversed(trajs) if t is not None), q)
-            planned.plan_rest(
-                first_stop + 1, self._motions(plan, range(first_stop + 1, guarded + 1), q_stop, obstacles)
-            )
-        return planned
-
-    async def _motions(
-        self, plan: GraspPlan, indices: range, start: np.ndarray, obstacles: tuple[SeenBox, ...]
-    ) -> list[JointTrajectory | None]:
-        """The trajectories to the waypoints ``indices`` (None elsewhere) from ``start``, planned in one
-        request; a guarded approach is slowed to the grasp plan's touch-down speed."""
-        moves = {i: m for i in indices if (m := move_to(plan, i)) is not None}
-        last = max(moves, default=-1)
-        moves = {i: replace(m, blend=i != last and blends(plan, i)) for i, m in moves.items()}
-        planned = await self.motion.plan_moves(start, list(moves.values()), obstacles)
-        if len(planned) != len(moves):
-            raise PlanningError(f"the motion planner answered {len(planned)} of {len(moves)} moves")
-        trajs: list[JointTrajectory | None] = [None] * len(plan.waypoints)
-        q = start
-        for i, traj in zip(moves, planned, strict=True):
-            if traj is None:
-                continue
-            trajs[i] = await self._paced(plan.waypoints[i], moves[i], traj, q)
-            q = traj.positions[-1]
-        return trajs
-
-    async def _paced(
-        self, w: PlannedWaypoint, move: Move, traj: JointTrajectory, start: np.ndarray
-    ) -> JointTrajectory:
-        if w.guard_force_n > 0 and w.guard_speed_m_s > 0:
-            p0 = (await self.motion.tool_pose(start))[:3, 3]
-            if w.guard_slow_band_m > 0 and w.guard_approach_speed_m_s > w.guard_speed_m_s:
-                # two-stage: fast down to the band above the nominal contact, slow through it
-                along = np.asarray(w.guard_direction, dtype=float)
-                band_from = float(np.dot(w.T_base_tool[:3, 3] - p0, along)) - w.guard_slow_band_m
-                along_line = [
-                    float(np.dot((await self.motion.tool_pose(q))[:3, 3] - p0, along)) for q in traj.positions
-                ]
-                return paced_on_line(
-                    traj, np.asarray(along_line), w.guard_approach_speed_m_s, w.guard_speed_m_s, band_from
-                )
-            # a guarded approach goes no faster than the grasp plan's touch-down speed
-            dist = float(np.linalg.norm(move.target[:3, 3] - p0))
-            needed = dist / w.guard_speed_m_s
-            if traj.duration < needed:
-                traj = traj.scaled(needed / traj.duration)
-        return traj
+        return await self._planning.plan(task, obs, out, alternative, q)
 
     # ------------------------------------------------------------------ EXECUTE
     async def _replan_run(
@@ -447,7 +311,7 @@ class Orchestrator:
         returns waypoint ``i``'s new trajectory."""
         end = run_end(planned, i)
         again = await self._timed(
-            self._motions(planned.plan, range(i, end + 1), q_now, planned.obstacles),
+            self._planning.motions(planned.plan, range(i, end + 1), q_now, planned.obstacles),
             self.config.deadlines.plan_s,
             what,
         )
@@ -517,7 +381,7 @@ class Orchestrator:
                         # what follows starts where the guard stopped: planned while the jaws act
                         planned.plan_rest(
                             i + 1,
-                            self._motions(
+                            self._planning.motions(
                                 plan, range(i + 1, len(plan.waypoints)), q_known, planned.obstacles
                             ),
                         )
@@ -559,10 +423,10 @@ class Orchestrator:
             return
         home = np.asarray(self.config.home_joints, dtype=float)
         q = await self.robot.joints()
-        if _near(q, home) or self._clear(q):
+        if near(q, home) or self._planning.clear(q):
             return
         traj = await self._timed(
-            self._plan_single(q, Move(MotionKind.JOINT, home, label="SAFE_HOME"), ()),
+            self._planning.single(q, Move(MotionKind.JOINT, home, label="SAFE_HOME"), ()),
             self.config.deadlines.plan_s,
             "planning the way to safe home",
         )
@@ -579,10 +443,10 @@ class Orchestrator:
         obstacles = (*obs.obstacles, placed_box(planned.plan))
         try:
             q = await self.robot.joints()
-            if _near(q, home) or self._clear(q):
+            if near(q, home) or self._planning.clear(q):
                 return
             traj = await self._timed(
-                self._plan_single(q, Move(MotionKind.JOINT, home, label="HOME"), obstacles),
+                self._planning.single(q, Move(MotionKind.JOINT, home, label="HOME"), obstacles),
                 self.config.deadlines.plan_s,
                 "planning the way home",
             )
@@ -592,26 +456,6 @@ class Orchestrator:
             raise
         except RobotError as exc:  # the object is placed; a failed way home is reported, not fatal
             log.warning("could not return to safe home after placing: %s", exc)
-
-    def _not_the_arm(self, boxes: tuple[SeenBox, ...], q: np.ndarray) -> tuple[SeenBox, ...]:
-        """The boxes vision saw, without those that are the arm itself where it stood for the picture."""
-        view = self._view
-        if view is None or _near(q, self.config.home_joints):
-            return boxes
-        kept = tuple(b for b in boxes if not view.holds_arm(q, b.min, b.max))
-        if len(kept) < len(boxes):
-            log.info("%d seen obstacle(s) are the arm itself: left out", len(boxes) - len(kept))
-        return kept
-
-    def _clear(self, q: np.ndarray) -> bool:
-        """Whether the arm at ``q`` leaves the camera's view of the pick zone clear (by the camera model)."""
-        return self._view is not None and bool(self._view.clear(np.asarray(q, dtype=float)))
-
-    async def _plan_single(
-        self, start: np.ndarray, move: Move, obstacles: tuple[SeenBox, ...]
-    ) -> JointTrajectory | None:
-        (traj,) = await self.motion.plan_moves(start, [move], obstacles)
-        return traj
 
     # ------------------------------------------------------------------ recovery helpers
     async def _back_off_open(self, planned: PlannedPick) -> None:
@@ -638,10 +482,3 @@ class Orchestrator:
             await self.robot.stop()
         except RobotError as exc:
             log.warning("stop while aborting failed: %s", exc)
-
-
-def _near(q: np.ndarray, target: np.ndarray | tuple[float, ...] | None) -> bool:
-    """The arm is at ``target`` within the tracking error a finished motion leaves."""
-    if target is None:
-        return False
-    return bool(np.max(np.abs(np.asarray(q) - np.asarray(target))) <= RESUME_TOLERANCE_RAD)

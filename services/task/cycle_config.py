@@ -1,0 +1,23 @@
+"""What a pick cycle is allowed and where it works: retry budgets, deadlines, the place region, the grasp
+offsets tried along a rod and the safe home (built from the settings by services.task.runner)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from services.task.recovery import RetryLimits
+from services.task.states import StateDeadlines
+
+
+@dataclass(frozen=True)
+class CycleConfig:
+    limits: RetryLimits = field(default_factory=RetryLimits)
+    deadlines: StateDeadlines = field(default_factory=StateDeadlines)
+    detect_retry_delay_s: float = 0.5
+    verify_grasp: bool = True  # check the gripper's object signal after LIFT
+    place_xy: tuple[float, float] | None = (0.45, 0.0)  # None: the grasp service's configured spot
+    place_region_min: tuple[float, float] = (0.35, -0.25)
+    place_region_max: tuple[float, float] = (0.60, 0.25)
+    place_clearance_m: float = 0.06
+    grasp_offsets_m: tuple[float, ...] = (0.0, 0.035, -0.035, 0.055, -0.055, 0.075, -0.075)
+    home_joints: tuple[float, ...] | None = None  # rad; each cycle starts here (clear camera view)

@@ -1,0 +1,202 @@
+"""PLAN: from what vision saw to a pick under way — the scene's obstacles, the place spot, the grasp plan
+with its way home, and the motions to its first stop planned while the rest plans in the background.
+
+Pure orchestration over the grasp and motion ports (no I/O of its own); the cycle (services.task.cycle)
+decides when to plan, what to do when planning fails, and executes what this returns."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import replace
+
+import numpy as np
+
+from services.common.errors import PlanningError
+from services.common.modes import GripperCommand, TaskKind
+from services.kinematics.trajectory import JointTrajectory
+from services.task.cycle_config import CycleConfig
+from services.task.moves import (
+    blends,
+    box_around,
+    move_to,
+    object_id,
+    park_pose,
+    pose_list,
+    safe_home_of,
+    with_way_home,
+    without_safe_home,
+)
+from services.task.pacing import paced_on_line
+from services.task.placement import free_place_xy, place_candidates
+from services.task.planned import PlannedPick
+from services.task.ports import (
+    ArmView,
+    GraspPlan,
+    GraspPort,
+    MotionPort,
+    Move,
+    Observation,
+    PlannedWaypoint,
+    SeenBox,
+)
+from services.task.states import PickOutcome
+
+log = logging.getLogger("pickplace.task.planning")
+
+RESUME_TOLERANCE_RAD = np.deg2rad(0.5)
+OBJECT_MARGIN_M = 0.0  # the motion scene pads every box already (motion.padding_m)
+
+
+class PickPlanning:
+    """Plans picks for one cell: its grasp and motion planners, the cycle's configuration and the
+    camera's view of the pick zone (None: only the safe home leaves it clear)."""
+
+    def __init__(self, grasp: GraspPort, motion: MotionPort, config: CycleConfig, view: ArmView | None):
+        self.grasp, self.motion, self.config, self.view = grasp, motion, config, view
+
+    async def plan(
+        self, task: TaskKind, obs: Observation, out: PickOutcome, alternative: int, q: np.ndarray
+    ) -> PlannedPick:
+        """The ``alternative``-th option for the first object of ``obs`` with the arm at ``q``; records the
+        object, the grasp and the poses on ``out``."""
+        # everything on the table that is not the target is an obstacle for the carried object too
+        target_cube = obs.cubes[0] if task is TaskKind.SORT_CUBES and obs.cubes else None
+        obstacles = (
+            self.not_the_arm(obs.obstacles, q)
+            + tuple(
+                box_around(c.centroid, c.size / 2 + OBJECT_MARGIN_M)
+                for c in obs.cubes
+                if c is not target_cube
+            )
+            + tuple(box_around(r.center, r.length / 2 + OBJECT_MARGIN_M) for r in obs.rods[1:])
+        )
+        if task is TaskKind.STAND_ROD:
+            rod = obs.rods[0]
+            place = self._place(replace(obs, obstacles=obstacles))
+            # recovery options: grasp the rod at other points along it (a neighbour may block the
+            # fingers at its centre; the twin notes show ±50 mm off-centre still stands the rod, and
+            # ±75 mm (pads 14 mm inside the end) was seen to stand it in eval)
+            offsets = self.config.grasp_offsets_m
+            offset = offsets[alternative % len(offsets)]
+            plan = await self.grasp.plan_rod(rod, q, obstacles, alternative // len(offsets), place, offset)
+            out.object_id = object_id(rod)
+        else:
+            cube = obs.cubes[0]
+            plan = await self.grasp.plan_cube(cube, q, obstacles, alternative)
+            out.object_class = f"cube_{cube.color}"
+            out.object_id = f"cube@{cube.centroid[0]:.3f},{cube.centroid[1]:.3f}"
+        out.grasp_quality = plan.quality
+        grasp_wp = next((w for w in plan.waypoints if w.gripper is GripperCommand.CLOSE), plan.waypoints[0])
+        out.pick_pose = pose_list(grasp_wp.T_base_tool)
+        out.place_pose = [*map(float, plan.place_position), 0.0, 0.0, 0.0, 1.0]
+        home = safe_home_of(plan)
+        if home is not None and not near(q, home) and self.clear(q):
+            plan = without_safe_home(plan)  # out of the camera's view already: straight to the pre-grasp
+        if home is not None:
+            # back only as far as the first pose that leaves the camera's view clear for the next look
+            end = plan.waypoints[-1].joints
+            park = park_pose(end, home, self.clear) if self.view is not None else home
+            plan = with_way_home(plan, park)
+        # the arm sets off as soon as the moves to its first stop are planned; the rest up to the
+        # touch-down plans meanwhile (and what follows a touch-down plans from where it touched)
+        n = len(plan.waypoints)
+        first_stop = next(
+            (i for i in range(n) if move_to(plan, i) is not None and not blends(plan, i)), n - 1
+        )
+        trajs = await self.motions(plan, range(first_stop + 1), q, obstacles)
+        planned = PlannedPick(plan, trajs, obstacles, rest_from=n, home=home)
+        if first_stop + 1 < n:
+            guarded = next(
+                (i for i in range(first_stop + 1, n) if plan.waypoints[i].guard_force_n > 0), n - 1
+            )
+            q_stop = next((t.positions[-1] for t in reversed(trajs) if t is not None), q)
+            planned.plan_rest(
+                first_stop + 1, self.motions(plan, range(first_stop + 1, guarded + 1), q_stop, obstacles)
+            )
+        return planned
+
+    def _place(self, obs: Observation) -> np.ndarray | None:
+        """Where to stand the rod: the configured spot or the nearest free one (None: the grasp service's)."""
+        if self.config.place_xy is None:
+            return None
+        cands = place_candidates(
+            np.asarray(self.config.place_xy),
+            np.asarray(self.config.place_region_min),
+            np.asarray(self.config.place_region_max),
+        )
+        place = free_place_xy(obs, cands, self.config.place_clearance_m)
+        if place is None:
+            raise PlanningError(
+                f"no free spot to stand the rod near {self.config.place_xy} "
+                f"({len(cands)} candidates, clearance {self.config.place_clearance_m} m)"
+            )
+        return place
+
+    async def motions(
+        self, plan: GraspPlan, indices: range, start: np.ndarray, obstacles: tuple[SeenBox, ...]
+    ) -> list[JointTrajectory | None]:
+        """The trajectories to the waypoints ``indices`` (None elsewhere) from ``start``, planned in one
+        request; a guarded approach is slowed to the grasp plan's touch-down speed."""
+        moves = {i: m for i in indices if (m := move_to(plan, i)) is not None}
+        last = max(moves, default=-1)
+        moves = {i: replace(m, blend=i != last and blends(plan, i)) for i, m in moves.items()}
+        planned = await self.motion.plan_moves(start, list(moves.values()), obstacles)
+        if len(planned) != len(moves):
+            raise PlanningError(f"the motion planner answered {len(planned)} of {len(moves)} moves")
+        trajs: list[JointTrajectory | None] = [None] * len(plan.waypoints)
+        q = start
+        for i, traj in zip(moves, planned, strict=True):
+            if traj is None:
+                continue
+            trajs[i] = await self._paced(plan.waypoints[i], moves[i], traj, q)
+            q = traj.positions[-1]
+        return trajs
+
+    async def _paced(
+        self, w: PlannedWaypoint, move: Move, traj: JointTrajectory, start: np.ndarray
+    ) -> JointTrajectory:
+        if w.guard_force_n > 0 and w.guard_speed_m_s > 0:
+            p0 = (await self.motion.tool_pose(start))[:3, 3]
+            if w.guard_slow_band_m > 0 and w.guard_approach_speed_m_s > w.guard_speed_m_s:
+                # two-stage: fast down to the band above the nominal contact, slow through it
+                along = np.asarray(w.guard_direction, dtype=float)
+                band_from = float(np.dot(w.T_base_tool[:3, 3] - p0, along)) - w.guard_slow_band_m
+                along_line = [
+                    float(np.dot((await self.motion.tool_pose(q))[:3, 3] - p0, along)) for q in traj.positions
+                ]
+                return paced_on_line(
+                    traj, np.asarray(along_line), w.guard_approach_speed_m_s, w.guard_speed_m_s, band_from
+                )
+            # a guarded approach goes no faster than the grasp plan's touch-down speed
+            dist = float(np.linalg.norm(move.target[:3, 3] - p0))
+            needed = dist / w.guard_speed_m_s
+            if traj.duration < needed:
+                traj = traj.scaled(needed / traj.duration)
+        return traj
+
+    async def single(
+        self, start: np.ndarray, move: Move, obstacles: tuple[SeenBox, ...]
+    ) -> JointTrajectory | None:
+        (traj,) = await self.motion.plan_moves(start, [move], obstacles)
+        return traj
+
+    def not_the_arm(self, boxes: tuple[SeenBox, ...], q: np.ndarray) -> tuple[SeenBox, ...]:
+        """The boxes vision saw, without those that are the arm itself where it stood for the picture."""
+        view = self.view
+        if view is None or near(q, self.config.home_joints):
+            return boxes
+        kept = tuple(b for b in boxes if not view.holds_arm(q, b.min, b.max))
+        if len(kept) < len(boxes):
+            log.info("%d seen obstacle(s) are the arm itself: left out", len(boxes) - len(kept))
+        return kept
+
+    def clear(self, q: np.ndarray) -> bool:
+        """Whether the arm at ``q`` leaves the camera's view of the pick zone clear (by the camera model)."""
+        return self.view is not None and bool(self.view.clear(np.asarray(q, dtype=float)))
+
+
+def near(q: np.ndarray, target: np.ndarray | tuple[float, ...] | None) -> bool:
+    """The arm is at ``target`` within the tracking error a finished motion leaves."""
+    if target is None:
+        return False
+    return bool(np.max(np.abs(np.asarray(q) - np.asarray(target))) <= RESUME_TOLERANCE_RAD)
