@@ -100,6 +100,11 @@ class ControllerError(ExecutionError):
         self.alarms = alarms
 
 
+class ContactAlarmError(ControllerError):
+    """The controller stopped the arm on a contact its collision detection felt (Dobot alarm 117): the arm
+    rests where it touched. Cleared like any alarm; a grasp approach that touched is retried higher."""
+
+
 # --- hardware -----------------------------------------------------------------
 class HardwareError(RobotError):
     grpc_code = grpc.StatusCode.UNAVAILABLE

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 
 from services import dobot
 from services.common.errors import (
+    ContactAlarmError,
     ControllerError,
     EmergencyStopError,
     ExecutionError,
@@ -681,7 +682,7 @@ class DobotClient(DobotCommands):
                         raise EmergencyStopError("emergency stop is active; motion aborted")
                     if fb.in_error:
                         ids, text = await self.describe_alarms()
-                        raise ControllerError(
+                        raise (ContactAlarmError if fb.collision else ControllerError)(
                             f"controller alarm during motion {result_id}: {text}", alarms=tuple(ids)
                         )
                     if fb.robot_mode == RobotMode.DISABLED:

@@ -22,6 +22,7 @@ from typing import TypeVar
 import numpy as np
 
 from services.common.errors import (
+    ContactAlarmError,
     ContinuationLateError,
     ControllerError,
     EmergencyStopError,
@@ -457,7 +458,7 @@ class RobotDriver(Supervision):
                     raise EmergencyStopError(f"emergency stop during trajectory step {k}")
                 if fb.in_error:
                     alarm_ids, text = await self.client.describe_alarms()
-                    raise ControllerError(
+                    raise (ContactAlarmError if fb.collision else ControllerError)(
                         f"controller alarm during trajectory step {k}: {text}", alarms=tuple(alarm_ids)
                     )
                 if time.time_ns() - fb.received_ns > STALE_FEEDBACK_NS:

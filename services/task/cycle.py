@@ -26,6 +26,7 @@ from typing import TypeVar, cast
 import numpy as np
 
 from services.common.errors import (
+    ContactAlarmError,
     ContinuationLateError,
     GraspFailureError,
     ObjectNotDetectedError,
@@ -40,9 +41,11 @@ from services.task.cycle_config import CycleConfig
 from services.task.deadline import within
 from services.task.moves import (
     ends_in_motion,
+    grasp_approach,
     is_last_of,
     move_to,
     placed_box,
+    raise_waypoint,
     raised,
     run_end,
     starts_in_motion,
@@ -239,7 +242,12 @@ class Orchestrator:
                 if action is Action.CLEAR_AND_RESUME:
                     # the scene is as planned (the object in the gripper if it was carried): go on from
                     # the failed waypoint, its motion replanned from where the arm stands
-                    w = planned.plan.waypoints[self._progress.index]
+                    i = self._progress.index
+                    if isinstance(exc, ContactAlarmError) and grasp_approach(planned.plan, i):
+                        # the fingertips met the table before the grasp: the table is higher than seen
+                        raise_waypoint(planned.plan, i, self.config.contact_raise_m)
+                        planned.moved.add(i)
+                    w = planned.plan.waypoints[i]
                     self._enter(state_for(w.name), f"resuming at {w.name} after {type(exc).__name__}")
                     continue
                 if action is Action.REGRASP or (action is Action.NEXT_GRASP and self._progress.index > 0):
@@ -377,8 +385,9 @@ class Orchestrator:
                         log.warning("%s: no touch-down detected within the overtravel", w.name)
                     if w.guard_force_n > 0:
                         q_known = await self.robot.joints()  # where the arm came to rest after the stop
-                    if w.guard_force_n > 0 and i + 1 < len(plan.waypoints):
-                        # what follows starts where the guard stopped: planned while the jaws act
+                    if (w.guard_force_n > 0 or i in planned.moved) and i + 1 < len(plan.waypoints):
+                        # what follows starts where the guard stopped (or where a moved waypoint put
+                        # the arm): planned while the jaws act
                         planned.plan_rest(
                             i + 1,
                             self._planning.motions(

@@ -137,6 +137,18 @@ def box_around(center: np.ndarray, half: float) -> SeenBox:
     return SeenBox(lo, np.asarray(center, dtype=float) + half)
 
 
+def grasp_approach(plan: GraspPlan, i: int) -> bool:
+    """Whether waypoint ``i`` is a linear approach whose end the jaws close at, nothing held yet."""
+    w = plan.waypoints[i]
+    return w.motion is MotionKind.LINEAR and w.gripper is GripperCommand.CLOSE and not w.holding
+
+
+def raise_waypoint(plan: GraspPlan, i: int, dz: float) -> None:
+    """Move waypoint ``i``'s target up by ``dz`` (its joints are planned again from the pose)."""
+    w = plan.waypoints[i]
+    plan.waypoints[i] = replace(w, T_base_tool=raised(w.T_base_tool, dz))
+
+
 def is_last_of(plan: GraspPlan, i: int, state: CycleState) -> bool:
     nxt = plan.waypoints[i + 1].name if i + 1 < len(plan.waypoints) else ""
     return state_for(nxt) is not state

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Awaitable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -25,6 +25,9 @@ class PlannedPick:
     rest: asyncio.Task[list[JointTrajectory | None]] | None = None
     rest_from: int = 0
     home: np.ndarray | None = None  # the safe home of the plan (regrasps and the way home go there)
+    # waypoints moved after planning (a grasp approach retried higher): what follows them is planned
+    # again from where the arm comes to rest there
+    moved: set[int] = field(default_factory=set)
 
     async def settle(self, seconds: float) -> None:
         """Wait for the rest of the motions (PlanningError / RobotError as planning raised them)."""

@@ -7,7 +7,7 @@ from collections.abc import AsyncIterator
 import numpy as np
 import pytest
 
-from services.common.errors import ControllerError
+from services.common.errors import ContactAlarmError
 from services.common.settings import ReconnectSettings, Settings
 from services.dobot import RobotMode
 from services.kinematics.robot_models import get_robot
@@ -77,7 +77,7 @@ async def test_driving_into_the_table_raises_the_collision_alarm(twin_server) ->
         rid = await c.mov_j(above, v=60)
         await c.wait_motion_done(rid, 20.0)
         rid = await c.mov_j(below, v=20)
-        with pytest.raises(ControllerError) as err:
+        with pytest.raises(ContactAlarmError) as err:  # a contact, told apart from other alarms
             await c.wait_motion_done(rid, 20.0)
         assert 117 in err.value.alarms
         fb = await c.next_feedback()

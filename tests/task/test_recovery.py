@@ -13,6 +13,7 @@ import pytest
 from services.common.errors import (
     CameraConnectionError,
     CollisionError,
+    ContactAlarmError,
     ControllerError,
     EmergencyStopError,
     GraspFailureError,
@@ -208,6 +209,43 @@ async def test_an_alarm_is_cleared_and_the_cycle_resumes_from_where_the_arm_stop
     i = cell.states.index(CycleState.GRASP)
     assert cell.states[i : i + 3] == [CycleState.GRASP, CycleState.GRASP, CycleState.LIFT]
     assert "resuming at GRASP after ControllerError" in cell.messages[i + 1]
+
+
+async def test_a_grasp_approach_stopped_on_a_contact_is_retried_higher_and_the_rest_follows_from_there() -> (
+    None
+):
+    # the fingertips meet a table the camera saw too low: the controller stops the GRASP line near its end
+    touched = Fault(ContactAlarmError("controller alarm: collision detected", alarms=(117,)), at=0.9)
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))), robot=FakeRobot(faults={1: touched}))
+    outcome = await cell.run()
+    assert outcome.success and outcome.error_code == "ContactAlarmError"
+    first, again = _grasp_targets(cell)
+    assert again == pytest.approx(first + [0.0, 0.0, 0.003])
+    assert cell.robot.commands[3:7] == [
+        ("move", "GRASP", False),  # contact
+        ("recover",),
+        ("move", "GRASP", False),  # to 3 mm above the planned grasp
+        ("gripper", CLOSE),
+    ]
+    # what follows the grasp sets off from where the arm closed the jaws, not from the planned grasp
+    lift = [r for r in cell.motion.requests if r.labels[:1] == ["LIFT"]][-1]
+    assert np.array(lift.start) == pytest.approx(cell.robot.reached["GRASP"])
+    assert cell.robot.reached["GRASP"][2] == pytest.approx(first[2] + 0.003)
+
+
+async def test_an_alarm_that_is_not_a_contact_resumes_the_grasp_as_planned() -> None:
+    cell = FakeCell(
+        FakeVision(seen(rod_at(0.5, 0.1))),
+        robot=FakeRobot(faults={1: Fault(ControllerError("alarm 22"), at=0.9)}),
+    )
+    assert (await cell.run()).success
+    first, again = _grasp_targets(cell)
+    assert np.array_equal(again, first)
+
+
+def _grasp_targets(cell: FakeCell) -> list[np.ndarray]:
+    """The GRASP line's target position in each motion request that planned it."""
+    return [m.target[:3, 3] for r in cell.motion.requests for m in r.moves if m.label == "GRASP"]
 
 
 async def test_an_alarm_while_carrying_the_rod_resumes_with_the_rod_in_the_gripper() -> None:
