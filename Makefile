@@ -56,14 +56,17 @@ bench: install wrk
 # it (the report says the speed achieved). 2 is what this 2-core machine keeps: at 3-4x the driver's
 # ServoJ feed fell behind the controller far more often (24 streams re-timed from rest in 4 trials at
 # 3x; 556 in 1,000 trials at 2x, which took 93 min) and a re-timed stream no longer moves as planned.
+# Every trial is journalled as it ends (<report>.trials.jsonl): an interrupted run goes on where it
+# stopped with `make eval-long EVAL_FLAGS=--resume`.
 EVAL_SPEED ?= 2
+EVAL_FLAGS ?=
 eval-long: install
 	@mkdir -p var/eval
 	@start=$$(date +%s); \
 	MUJOCO_GL=egl $(VENV)/bin/pickplace eval --profile sim --trials 1000 --seed 1000 --speed $(EVAL_SPEED) \
-	  --json var/eval/stand-rod.json && \
+	  --json var/eval/stand-rod.json $(EVAL_FLAGS) && \
 	MUJOCO_GL=egl $(VENV)/bin/pickplace eval --profile sim --task sort-cubes --trials 300 --seed 1000 \
-	  --speed $(EVAL_SPEED) --json var/eval/sort-cubes.json; \
+	  --speed $(EVAL_SPEED) --json var/eval/sort-cubes.json $(EVAL_FLAGS); \
 	rc=$$?; echo "eval-long wall time: $$(( $$(date +%s) - start )) s (reports in var/eval/)"; exit $$rc
 
 # The gateway's API contract under schemathesis (all checks, all phases, stateful links) for 10 min

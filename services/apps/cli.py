@@ -129,7 +129,18 @@ def evaluate(
     speed: Annotated[float, typer.Option(help="sim time per wall time")] = 3.0,
     calibration_error_mm: Annotated[float, typer.Option(help="inject this camera position error")] = 0.0,
     calibration_error_deg: Annotated[float, typer.Option(help="inject this camera rotation error")] = 0.0,
-    json_out: Annotated[str, typer.Option("--json", help="write the full report as JSON here")] = "",
+    json_out: Annotated[
+        str,
+        typer.Option(
+            "--json",
+            help="write the full report as JSON here; each trial is also journalled as it ends, in "
+            "<this path>.trials.jsonl",
+        ),
+    ] = "",
+    resume: Annotated[
+        bool,
+        typer.Option("--resume", help="continue an interrupted run: take the trials its journal holds"),
+    ] = False,
     load: Annotated[
         int, typer.Option(min=0, help="run N busy processes beside the cell (outcomes must not change)")
     ] = 0,
@@ -147,10 +158,14 @@ def evaluate(
     and report success with its 95 % interval, cycle time, failures and success per parameter bin."""
     from pathlib import Path
 
+    from services.apps.eval_journal import TrialJournal, journal_path
     from services.apps.evaluation import print_report, run_eval, write_report
 
     if task not in tuple(TaskKind):
         console.print(f"[red]--task must be stand-rod or sort-cubes, not {task!r}[/red]")
+        raise typer.Exit(2)
+    if resume and not json_out:
+        console.print("[red]--resume needs --json: the journal it continues lies beside that report[/red]")
         raise typer.Exit(2)
     # a self-contained run: free loopback ports, so it never collides with a running cell
     zport = free_loopback_port()
@@ -168,7 +183,32 @@ def evaluate(
     error = None
     if calibration_error_mm or calibration_error_deg:
         error = (calibration_error_mm / 1000.0, calibration_error_deg)
-    report = _run(run_eval(s, trials, seed, task, error, console, load=load, randomize=not nominal))
+    journal = None
+    if json_out:
+        header = {
+            "task": task,
+            "seed": seed,
+            "trials": trials,
+            "randomized": not nominal,
+            "calibration_error": list(error) if error else None,
+            "robot": s.robot.model,
+            "speed": speed,
+            "load": load,
+        }
+        try:
+            journal = TrialJournal.open(journal_path(Path(json_out)), header, resume)
+        except ConfigurationError as exc:
+            console.print(f"[red]{exc}[/red]")
+            raise typer.Exit(2) from exc
+        if journal.done:
+            console.print(f"resuming: {len(journal.done)} trials taken from {journal.path}")
+    try:
+        report = _run(
+            run_eval(s, trials, seed, task, error, console, load=load, randomize=not nominal, journal=journal)
+        )
+    finally:
+        if journal is not None:
+            journal.close()
     if report is None:
         return
     print_report(report, console)

@@ -43,6 +43,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from services.apps.cell import Cell
+from services.apps.eval_journal import TrialJournal
 from services.apps.eval_report import BinStat, _p95, sensitivity, wilson_interval
 from services.apps.eval_report import print_report as print_report
 from services.apps.eval_report import write_report as write_report
@@ -236,7 +237,10 @@ async def run_eval(
     progress: bool = True,
     load: int = 0,
     randomize: bool = True,
+    journal: TrialJournal | None = None,
 ) -> EvalReport:
+    """``journal``: each finished trial is appended to it as it ends, and the trials it already holds
+    (a resumed run) are taken from it instead of run again."""
     from services.sim.twin.randomization import record_ranges
 
     s = settings.model_copy(
@@ -260,7 +264,7 @@ async def run_eval(
             s, seed=seed, perfect_calibration=calibrated, calibration_error=calibration_error
         ) as cell:
             sim_t0 = cell.sim_time()
-            await trial.run_all(cell, report, trials, seed, console, progress)
+            await trial.run_all(cell, report, trials, seed, console, progress, journal)
             wall = time.perf_counter() - t_start
             report.sim_speed_achieved = (cell.sim_time() - sim_t0) / wall if wall > 0 else None
             report.sim_late_ticks = cell.sim_late_ticks
@@ -277,7 +281,14 @@ class _TrialRunner:
     tilt_at_release: list[float] = field(default_factory=list)
 
     async def run_all(
-        self, cell: Cell, report: EvalReport, trials: int, seed: int, console: Console | None, progress: bool
+        self,
+        cell: Cell,
+        report: EvalReport,
+        trials: int,
+        seed: int,
+        console: Console | None,
+        progress: bool,
+        journal: TrialJournal | None = None,
     ) -> None:
         assert cell.task is not None and cell.truth is not None  # a twin Cell starts both on entry
         runner = cell.task.runner
@@ -300,10 +311,16 @@ class _TrialRunner:
         )
         with bar:
             job = bar.add_task(self.task, total=trials, rate="")
+            done = journal.done_by_seed() if journal else {}
             for i in range(trials):
                 self.tilt_at_release.clear()
+                if (earlier := done.get(seed + i)) is not None:  # judged by the run this one resumes
+                    report.results.append(earlier)
+                    report.successes += int(earlier.success)
+                    bar.update(job, advance=1, rate=f"{report.successes}/{i + 1} ok")
+                    continue
                 try:
-                    if i > 0:
+                    if i > 0:  # the cell starts in the scene of ``seed``
                         await cell.reset_scene(seed + i)
                     outcome = await runner.run_cycle(self.task)
                     res = await self.judge(cell, seed + i, outcome)
@@ -313,6 +330,8 @@ class _TrialRunner:
                     res.randomization = _world_record(cell, seed + i)
                 report.results.append(res)
                 report.successes += int(res.success)
+                if journal is not None:
+                    journal.append(res)
                 bar.update(job, advance=1, rate=f"{report.successes}/{i + 1} ok")
 
     async def judge(self, cell: Cell, seed: int, outcome: PickOutcome) -> TrialResult:

@@ -7,6 +7,7 @@ import json
 import pytest
 
 from services.apps import evaluation
+from services.apps.eval_journal import TrialJournal, read_journal
 from services.apps.evaluation import (
     HARNESS_STAGE,
     MAX_SETTLE_S,
@@ -23,8 +24,12 @@ pytestmark = [pytest.mark.integration, pytest.mark.slow]
 async def test_eval_two_trials_reports_ground_truth_on_the_controller_clock(tmp_path):
     s = cell_settings(tmp_path, sim={"speed": 3.0})
     # the nominal world: these seeds stand there (randomized worlds: test_evaluation_randomized.py)
-    report = await run_eval(s, trials=2, seed=10, progress=False, randomize=False)
+    journal = TrialJournal.open(tmp_path / "eval.json.trials.jsonl", {"task": "stand-rod"}, resume=False)
+    report = await run_eval(s, trials=2, seed=10, progress=False, randomize=False, journal=journal)
+    journal.close()
     assert len(report.results) == 2 and [r.seed for r in report.results] == [10, 11]
+    # every trial was journalled as it ended: an interrupted run would have kept it
+    assert read_journal(journal.path, {"task": "stand-rod"}) == report.results
     for r in report.results:
         # success is the twin's verdict; a failure always says where and why
         assert r.success == (not r.ground_truth_reasons)
