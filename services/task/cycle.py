@@ -102,6 +102,9 @@ class Orchestrator:
         self._outcome: PickOutcome | None = None
         self._stage_t0: tuple[float, float] | None = None  # (clock, wall) at entry; None between cycles
         self._progress = Progress()
+        # the last trajectory sent ends in motion and the next has not been sent: the arm flows on
+        # through queued targets, and a failed step must stop it rather than let the stream run dry
+        self._flowing = False
         # the grasp and motion planners, and the arm against the camera's view of the pick zone
         self._planning = PickPlanning(grasp, motion, self.config, view)
 
@@ -229,6 +232,11 @@ class Orchestrator:
             except SafetyError:
                 raise
             except RobotError as exc:
+                if self._flowing:
+                    # a step failed while the arm flows on (the grasp check during LIFT): stop it now,
+                    # not when the stream it was given runs dry and the driver's watchdog stops it
+                    self._flowing = False
+                    await self.robot.stop()
                 holding = planned.plan.waypoints[self._progress.index].holding  # the object is carried
                 action = decide(exc, attempts, self.config.limits, holding=holding)
                 out.error_code = type(exc).__name__
@@ -353,6 +361,7 @@ class Orchestrator:
                     traj = await self._replan_run(planned, i, q_now, f"replanning {w.name}")
                     continues = traj is not None and ends_in_motion(traj)
                 if traj is not None:
+                    self._flowing = False  # what flowed on is continued (or stopped) by this one
                     try:
                         res = await self._arm(
                             self.robot.execute(traj, w.guard_force_n, continues=continues),
@@ -374,6 +383,7 @@ class Orchestrator:
                             f"motion to {w.name}",
                         )
                     q_known, in_motion = res.final_q, continues
+                    self._flowing = continues
                     log.debug(
                         "%s: planned %.2f s, executed %.2f s%s",
                         w.name,

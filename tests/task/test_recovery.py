@@ -331,6 +331,25 @@ async def test_a_slipped_grasp_backs_off_open_looks_again_and_regrasps() -> None
     assert cell.vision.calls == 2 and len(cell.grasp.calls) == 2
 
 
+async def test_a_slip_found_while_the_arm_flows_on_from_lift_stops_it_before_backing_off() -> None:
+    """LIFT blends into the turn: the grasp check fails while the arm still runs through LIFT's queued
+    targets. The cycle stops it at once (before, the stream ran dry and the driver's watchdog stopped
+    the arm with a fault, 0.5 s later)."""
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))), robot=FakeRobot(holding_script=[False, True]))
+    cell.motion.blending = True
+    outcome = await cell.run()
+    assert outcome.success and outcome.attempts == 2 and "LIFT" in cell.robot.continued
+    lift = cell.robot.commands.index(("move", "LIFT", False))
+    assert cell.robot.commands[lift : lift + 4] == [
+        ("move", "LIFT", False),  # ends in motion; the sensor then says the rod is not in the gripper
+        ("stop",),
+        ("recover",),
+        ("gripper", OPEN),
+    ]
+    # a stop only where the arm flowed on: the regrasp's own LIFT holds the rod and flows into the turn
+    assert cell.robot.commands.count(("stop",)) == 1
+
+
 async def test_a_slip_beyond_the_regrasp_budget_aborts_open_handed() -> None:
     cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))), robot=FakeRobot(holding_script=[False]))
     outcome = await cell.run()
