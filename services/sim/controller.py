@@ -35,6 +35,7 @@ log = logging.getLogger("pickplace.sim.controller")
 MAX_TCP_SPEED_MM_S = 1000.0
 MAX_TCP_ACC_MM_S2 = 4000.0
 COMMAND_LOG_KEPT = 1024
+STOP_REST_RAD_S = 0.002  # a stopping arm is at rest (and held where it is) below this on every joint
 
 
 @dataclass
@@ -126,6 +127,7 @@ class SimController:
         self.servo_watchdog_trips = 0
         self.servo_watchdog_tripped_ms: int | None = None  # the controller clock at the last trip
         self.tracking_fault: TrackingFault | None = None  # fault injection (tests): see TrackingFault
+        self._stopping = False  # halted, the arm still braking: the reference follows it to rest
         q = np.zeros(spec.dof) if q0 is None else np.asarray(q0, dtype=float)
         self.q_ref = q.copy()
         self.qd_ref = np.zeros(spec.dof)
@@ -172,6 +174,7 @@ class SimController:
         self.qd_ref = np.zeros(self.spec.dof)
         self.qdd_ref = np.zeros(self.spec.dof)
         self.engine.hold()
+        self._stopping = True
 
     # ------------------------------------------------------------------ clock
     @property
@@ -183,6 +186,11 @@ class SimController:
         """Advance sim time by dt: queue, reference, engine, alarms, feedback record."""
         self.sim_time += dt
         self._servo_watchdog()
+        if self._stopping:
+            # a stop brakes the arm and holds it where it comes to rest, as a drive's quick stop does
+            # (holding the pose of the stop's instant pulled the arm back over its stopping distance:
+            # 150 ms before it was at rest from 0.6 rad/s in the twin, instead of ~40 ms)
+            self.q_ref = self.measured.q.copy()
         if self.enabled and not self.alarms and not self.paused:
             remaining = dt
             while remaining > 0:
@@ -209,6 +217,10 @@ class SimController:
             self.qdd_ref = np.zeros(self.spec.dof)
         before = self.measured
         self.measured = self.engine.step(dt, self.q_ref, self.qd_ref, self.qdd_ref)
+        if self._stopping and (
+            self.motion is not None or float(np.max(np.abs(self.measured.qd))) < STOP_REST_RAD_S
+        ):
+            self._stopping = False  # at rest (held here from now on), or a new motion took over
         if self.tracking_fault is not None:
             self.measured = _with_fault(self.tracking_fault, before, self.measured, dt)
         self._check_measured()
