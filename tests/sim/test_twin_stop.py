@@ -25,8 +25,12 @@ def ctrl() -> SimController:
     return c
 
 
+def _movj(joints_deg: list[float]) -> str:
+    return "MovJ(joint={" + ",".join(map(str, joints_deg)) + "})"
+
+
 def _at_speed(c: SimController) -> np.ndarray:
-    assert c.handle("MovJ(joint={%s})" % ",".join(map(str, GOAL))).startswith("0,")
+    assert c.handle(_movj(GOAL)).startswith("0,")
     for _ in range(1000):
         c.tick(DT)
         if np.max(np.abs(c.measured.qd)) > PRESS_RAD_S:
@@ -60,7 +64,7 @@ def test_a_stop_brakes_the_arm_to_rest_and_holds_it_where_it_stopped(ctrl: SimCo
     ctrl.handle("ClearError()")
     assert ctrl.handle("EnableRobot()").startswith("0,")
     assert np.max(np.abs(ctrl.q_ref - ctrl.measured.q)) < 2e-3
-    assert ctrl.handle("MovJ(joint={%s})" % ",".join(map(str, START))).startswith("0,")
+    assert ctrl.handle(_movj(START)).startswith("0,")
     for _ in range(600):
         ctrl.tick(DT)
     assert np.allclose(ctrl.measured.q, np.deg2rad(START), atol=2e-3)
