@@ -33,6 +33,7 @@ import logging
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from collections import Counter
 from collections.abc import Iterator
@@ -259,7 +260,11 @@ async def run_eval(
     trial = _TrialRunner(s, task, JointLimits.from_spec(spec), list(spec.joint_names))
     t_start = time.perf_counter()
     calibrated = calibration_error is not None
-    with busy_processes(load):
+    # its own state directory (the task's cycle journal): never the cell's, nor another eval's beside it
+    # (two evals at once renamed each other's journal, and the second took the first's cycle in progress
+    # for one a crash had cut)
+    with tempfile.TemporaryDirectory(prefix="pickplace-eval-") as state_dir, busy_processes(load):
+        s = s.model_copy(update={"state": s.state.model_copy(update={"dir": state_dir})})
         async with Cell(
             s, seed=seed, perfect_calibration=calibrated, calibration_error=calibration_error
         ) as cell:

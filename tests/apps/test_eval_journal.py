@@ -159,3 +159,31 @@ def test_the_cli_refuses_resume_without_a_report_and_another_runs_journal(tmp_pa
     TrialJournal.open(journal_path(report), {**HEADER, "task": "sort-cubes"}, resume=False).close()
     result = CliRunner().invoke(app, ["eval", "--seed", "10", "--json", str(report), "--resume"])
     assert result.exit_code == 2 and "journal of another evaluation" in result.output
+
+
+async def test_an_eval_keeps_its_state_in_a_directory_of_its_own(tmp_path, monkeypatch):
+    """Never the cell's state directory (the task's cycle journal), nor another eval's beside it."""
+    seen: list[str] = []
+
+    class Stop(Exception):
+        pass
+
+    class CellThatRecords:
+        def __init__(self, settings: Any, **kwargs: Any) -> None:
+            seen.append(str(settings.state.dir))
+
+        async def __aenter__(self) -> None:
+            raise Stop
+
+        async def __aexit__(self, *exc: object) -> None:
+            return None
+
+    monkeypatch.setattr(evaluation, "Cell", CellThatRecords)
+    s = evaluation.Settings().model_copy(
+        update={"state": evaluation.Settings().state.model_copy(update={"dir": str(tmp_path)})}
+    )
+    for _ in range(2):
+        with pytest.raises(Stop):
+            await evaluation.run_eval(s, 1, 0, progress=False)
+    assert len(seen) == 2 and str(tmp_path) not in seen and seen[0] != seen[1]
+    assert all("pickplace-eval-" in d for d in seen)
