@@ -28,6 +28,7 @@ import numpy as np
 from services.common.errors import (
     ContactAlarmError,
     ContinuationLateError,
+    ControllerError,
     GraspFailureError,
     ObjectNotDetectedError,
     PlanningError,
@@ -237,8 +238,12 @@ class Orchestrator:
                     # not when the stream it was given runs dry and the driver's watchdog stops it
                     self._flowing = False
                     await self.robot.stop()
-                holding = planned.plan.waypoints[self._progress.index].holding  # the object is carried
-                action = decide(exc, attempts, self.config.limits, holding=holding)
+                i = self._progress.index
+                holding = planned.plan.waypoints[i].holding  # the object is carried
+                # stopped again on the approach a contact already raised: the fingers press on a
+                # neighbour, not on the table (raising more, or resuming, meets it again): another grasp
+                again = i in planned.touched and isinstance(exc, ControllerError)
+                action = decide(exc, attempts, self.config.limits, holding=holding, another_grasp=again)
                 out.error_code = type(exc).__name__
                 log.warning("execution failed in %s: %s → %s", self.state.value, exc, action.value)
                 if action is Action.WAIT_FOR_OPERATOR:
@@ -250,11 +255,11 @@ class Orchestrator:
                 if action is Action.CLEAR_AND_RESUME:
                     # the scene is as planned (the object in the gripper if it was carried): go on from
                     # the failed waypoint, its motion replanned from where the arm stands
-                    i = self._progress.index
                     if isinstance(exc, ContactAlarmError) and grasp_approach(planned.plan, i):
                         # the fingertips met the table before the grasp: the table is higher than seen
                         raise_waypoint(planned.plan, i, self.config.contact_raise_m)
                         planned.moved.add(i)
+                        planned.touched.add(i)
                     w = planned.plan.waypoints[i]
                     self._enter(state_for(w.name), f"resuming at {w.name} after {type(exc).__name__}")
                     continue

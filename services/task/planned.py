@@ -28,6 +28,8 @@ class PlannedPick:
     # waypoints moved after planning (a grasp approach retried higher): what follows them is planned
     # again from where the arm comes to rest there
     moved: set[int] = field(default_factory=set)
+    # grasp approaches the controller stopped on a contact (each raised once it did)
+    touched: set[int] = field(default_factory=set)
 
     async def settle(self, seconds: float) -> None:
         """Wait for the rest of the motions (PlanningError / RobotError as planning raised them)."""

@@ -66,8 +66,19 @@ def _budget(limits: RetryLimits, counter: str) -> int:
     return getattr(limits, counter) - (1 if counter == "grasp_variants" else 0)
 
 
-def decide(error: BaseException, attempts: Attempts, limits: RetryLimits, *, holding: bool = False) -> Action:
+def decide(
+    error: BaseException,
+    attempts: Attempts,
+    limits: RetryLimits,
+    *,
+    holding: bool = False,
+    another_grasp: bool = False,
+) -> Action:
     """The next action after ``error``; also counts the attempt it spends.
+
+    ``another_grasp``: the failed step cannot be mended by doing it again (a grasp approach that met
+    something again after it was raised: not the table but a neighbour the fingers press on): a controller
+    error then spends a grasp option instead of an alarm retry.
 
     ``holding``: the failed step carries the object (the gripper closed on it). A plan that cannot be
     made from there is not traded for another grasp, which backs off with the jaws open and would drop
@@ -77,6 +88,11 @@ def decide(error: BaseException, attempts: Attempts, limits: RetryLimits, *, hol
     attempts.history.append(f"{type(error).__name__}: {error}")
     if isinstance(error, SafetyError):
         return Action.WAIT_FOR_OPERATOR
+    if another_grasp and isinstance(error, ControllerError) and not holding:
+        if attempts.grasp_variants < _budget(limits, "grasp_variants"):
+            attempts.grasp_variants += 1
+            return Action.NEXT_GRASP
+        return Action.ABORT
     for kinds, counter, action in _RULES:
         if isinstance(error, kinds):
             if holding and action is Action.NEXT_GRASP:

@@ -65,6 +65,16 @@ def test_safety_always_waits_for_the_operator_and_bad_input_aborts() -> None:
     assert actions(InvalidInputError("NaN pose"), 1) == [Action.ABORT]
 
 
+def test_a_step_that_doing_again_cannot_mend_spends_a_grasp_option() -> None:
+    attempts = Attempts()
+    alarm = ControllerError("refused: robot is in alarm state")
+    got = [decide(alarm, attempts, LIMITS, another_grasp=True) for _ in range(3)]
+    assert got == [Action.NEXT_GRASP] * 2 + [Action.ABORT] and attempts.alarms == 0
+    # never with the object in the gripper (another grasp would drop it), nor for a non-controller error
+    assert decide(alarm, Attempts(), LIMITS, another_grasp=True, holding=True) is Action.CLEAR_AND_RESUME
+    assert decide(GraspFailureError("slipped"), Attempts(), LIMITS, another_grasp=True) is Action.REGRASP
+
+
 def test_counters_are_shared_per_kind_and_history_keeps_every_error() -> None:
     attempts = Attempts()
     decide(ObjectNotDetectedError("a"), attempts, LIMITS)
@@ -231,6 +241,28 @@ async def test_a_grasp_approach_stopped_on_a_contact_is_retried_higher_and_the_r
     lift = [r for r in cell.motion.requests if r.labels[:1] == ["LIFT"]][-1]
     assert np.array(lift.start) == pytest.approx(cell.robot.reached["GRASP"])
     assert cell.robot.reached["GRASP"][2] == pytest.approx(first[2] + 0.003)
+
+
+async def test_a_grasp_approach_stopped_again_after_it_was_raised_backs_off_and_grasps_another_way() -> None:
+    """The fingers press on a neighbour, not on the table: raised 3 mm, the resumed approach is refused at
+    once (the controller alarms again while they still press). Raising again or resuming meets it again
+    (sort-cubes, 1 of 118 randomized trials aborted so): the cycle backs off and plans the next grasp."""
+    touched = Fault(ContactAlarmError("controller alarm: collision detected", alarms=(117,)), at=0.9)
+    refused = Fault(ControllerError("ServoJ refused with ErrorID -2: robot is in alarm state"), at=0.0)
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))), robot=FakeRobot(faults={1: touched, 2: refused}))
+    outcome = await cell.run()
+    assert outcome.success and outcome.attempts == 3  # the contact (an alarm), then a grasp option
+    assert cell.robot.commands[3:9] == [
+        ("move", "GRASP", False),  # contact
+        ("recover",),
+        ("move", "GRASP", False),  # raised 3 mm: refused, still pressing
+        ("recover",),
+        ("gripper", OPEN),  # back off open, out of the view, then look again
+        ("move", "BACK_OFF", False),
+    ]
+    # the next grasp option: the rod grasped 35 mm along its axis, away from what the fingers met
+    assert [c.grasp_offset_m for c in cell.grasp.calls] == [0.0, pytest.approx(0.035)]
+    assert cell.vision.calls == 2
 
 
 async def test_an_alarm_that_is_not_a_contact_resumes_the_grasp_as_planned() -> None:
