@@ -95,7 +95,11 @@ class PickPlanning:
         if home is not None:
             # back only as far as the first pose that leaves the camera's view clear for the next look
             end = plan.waypoints[-1].joints
-            park = park_pose(end, home, self.clear) if self.view is not None else home
+            park = (
+                park_pose(end, home, lambda q: self.clear(q) and not self.touches(q, obstacles))
+                if self.view is not None
+                else home
+            )
             plan = with_way_home(plan, park)
         # the arm sets off as soon as the moves to its first stop are planned; the rest up to the
         # touch-down plans meanwhile (and what follows a touch-down plans from where it touched)
@@ -189,6 +193,13 @@ class PickPlanning:
         if len(kept) < len(boxes):
             log.info("%d seen obstacle(s) are the arm itself: left out", len(boxes) - len(kept))
         return kept
+
+    def touches(self, q: np.ndarray, boxes: tuple[SeenBox, ...]) -> bool:
+        """Whether the arm at ``q`` reaches into a seen box (or close around it). Parked there, the next
+        picture would take the box for the arm itself and leave it out of the plan (the wall beside the
+        sort-cubes drop zone, left out so, was hit by the fingers on the next approach)."""
+        view = self.view
+        return view is not None and any(view.holds_arm(q, b.min, b.max) for b in boxes)
 
     def clear(self, q: np.ndarray) -> bool:
         """Whether the arm at ``q`` leaves the camera's view of the pick zone clear (by the camera model)."""

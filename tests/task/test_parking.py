@@ -62,3 +62,32 @@ async def test_a_seen_box_around_the_parked_arm_is_not_an_obstacle() -> None:
     assert outcome.success
     (box,) = cell.motion.requests[0].obstacles
     assert np.allclose(box.min, wall.min) and np.allclose(box.max, wall.max)
+
+
+class ArmOverTheWall(FakeView):
+    """The arm reaches into the wall's seen box (grown by the own-box pad) while the tool is below 0.31 m."""
+
+    def __init__(self, wall: SeenBox) -> None:
+        super().__init__(clear_above_m=0.25)
+        self.wall = wall
+
+    def holds_arm(self, q: np.ndarray, box_min: np.ndarray, box_max: np.ndarray) -> bool:
+        return bool(np.allclose(box_min, self.wall.min) and q[2] < 0.31 - 1e-9)
+
+
+async def test_the_arm_never_parks_inside_a_box_it_saw_so_the_next_picture_keeps_the_box() -> None:
+    """Parked over the wall beside the drop zone, the next picture took the wall for the arm and left it
+    out of the plan; the fingers then hit it (sort-cubes). The park pose leaves every seen box too."""
+    wall = SeenBox(np.array([0.20, 0.30, 0.0]), np.array([0.30, 0.40, 0.10]))
+    obs = seen(rod_at(0.5, 0.1))
+    cell = FakeCell(FakeVision(type(obs)(rods=obs.rods, obstacles=(wall,))), view=ArmOverTheWall(wall))
+    outcome = await cell.run()
+    assert outcome.success
+    home_move = cell.motion.requests[-1].moves[-1]
+    assert home_move.label == "HOME"  # the retract (0.25 m up) leaves the view clear, but reaches the wall
+    end = cell.grasp.plans[0].waypoints[-1].joints
+    # the first tenth of the way home that is out of the box: the tool at 0.31 m
+    assert np.allclose(home_move.target, end + 0.4 * (HOME - end))
+    # and the next cycle plans with the wall still in it
+    await cell.run()
+    assert any(np.allclose(b.min, wall.min) for b in cell.motion.requests[-1].obstacles)
