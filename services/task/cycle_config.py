@@ -20,6 +20,10 @@ class CycleConfig:
     place_region_max: tuple[float, float] = (0.60, 0.25)
     place_clearance_m: float = 0.06
     grasp_offsets_m: tuple[float, ...] = (0.0, 0.035, -0.035, 0.055, -0.055, 0.075, -0.075)
+    # the open jaws' footprint (along the rod, across it: motion.tool.finger_box_m) and the clearance
+    # the planners keep from a seen box (motion.padding_m): offsets whose footprint meets a box go last
+    jaw_footprint_m: tuple[float, float] = (0.03, 0.12)
+    jaw_clearance_m: float = 0.01
     # a grasp approach the controller stopped on a contact (the fingertips on a table seen too low:
     # camera calibration error of +-0.5 deg is +-6 mm at the rod) is retried this much higher, each time
     contact_raise_m: float = 0.003

@@ -15,6 +15,7 @@ from services.common.errors import PlanningError
 from services.common.modes import GripperCommand, TaskKind
 from services.kinematics.trajectory import JointTrajectory
 from services.task.cycle_config import CycleConfig
+from services.task.grasp_offsets import order_offsets
 from services.task.moves import (
     blends,
     box_around,
@@ -76,7 +77,15 @@ class PickPlanning:
             # recovery options: grasp the rod at other points along it (a neighbour may block the
             # fingers at its centre; the twin notes show ±50 mm off-centre still stands the rod, and
             # ±75 mm (pads 14 mm inside the end) was seen to stand it in eval)
-            offsets = self.config.grasp_offsets_m
+            cfg = self.config
+            offsets = order_offsets(
+                cfg.grasp_offsets_m,
+                rod.center,
+                rod.axis,
+                obstacles,
+                *cfg.jaw_footprint_m,
+                cfg.jaw_clearance_m,
+            )
             offset = offsets[alternative % len(offsets)]
             plan = await self.grasp.plan_rod(rod, q, obstacles, alternative // len(offsets), place, offset)
             out.object_id = object_id(rod)
