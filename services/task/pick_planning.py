@@ -58,10 +58,14 @@ class PickPlanning:
     async def plan(
         self, task: TaskKind, obs: Observation, out: PickOutcome, alternative: int, q: np.ndarray
     ) -> PlannedPick:
-        """The ``alternative``-th option for the first object of ``obs`` with the arm at ``q``; records the
-        object, the grasp and the poses on ``out``."""
+        """The ``alternative``-th option for an object of ``obs`` with the arm at ``q``; records the
+        object, the grasp and the poses on ``out``. A rod: the first one, grasped at the offsets along it in
+        turn. Cubes: each seen cube in turn (one that cannot be picked now, hemmed in by its neighbours,
+        waits until they are sorted), then each one's next-best grasp."""
         # everything on the table that is not the target is an obstacle for the carried object too
-        target_cube = obs.cubes[0] if task is TaskKind.SORT_CUBES and obs.cubes else None
+        target_cube = (
+            obs.cubes[alternative % len(obs.cubes)] if task is TaskKind.SORT_CUBES and obs.cubes else None
+        )
         obstacles = (
             self.not_the_arm(obs.obstacles, q)
             + tuple(
@@ -90,8 +94,10 @@ class PickPlanning:
             plan = await self.grasp.plan_rod(rod, q, obstacles, alternative // len(offsets), place, offset)
             out.object_id = object_id(rod)
         else:
-            cube = obs.cubes[0]
-            plan = await self.grasp.plan_cube(cube, q, obstacles, alternative)
+            if target_cube is None:
+                raise PlanningError("no cube to sort")
+            cube = target_cube
+            plan = await self.grasp.plan_cube(cube, q, obstacles, alternative // len(obs.cubes))
             out.object_class = f"cube_{cube.color}"
             out.object_id = f"cube@{cube.centroid[0]:.3f},{cube.centroid[1]:.3f}"
         out.grasp_quality = plan.quality

@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from services.common.errors import CollisionError
 from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.task.ports import SeenCube
 from services.task.states import CycleState
-from tests.task.fakes import HELD_ROD, HOME, FakeCell, FakeVision, rod_at, seen
+from tests.task.fakes import HELD_ROD, HOME, FakeCell, FakeGrasp, FakeVision, rod_at, seen
 from tests.task.fakes import joints_at as fake_joints_at
 
 CLOSE, OPEN = GripperCommand.CLOSE, GripperCommand.OPEN
@@ -128,6 +129,20 @@ async def test_a_cube_cycle_targets_the_first_cube_and_sees_the_others_as_obstac
     assert CycleState.TRANSPORT in cell.states and CycleState.REORIENT not in cell.states
     (box,) = cell.motion.requests[0].obstacles  # the blue cube, from the table up
     assert box.min[2] == 0.0 and np.allclose((box.min[:2] + box.max[:2]) / 2, [0.4, -0.1])
+
+
+async def test_a_cube_that_cannot_be_picked_now_waits_and_the_next_one_is_sorted() -> None:
+    """Hemmed in by its neighbours, the first cube has no feasible grasp at all (randomized sort-cubes:
+    all 32 options refused, 8 times over, then the cycle aborted): the next cube is planned instead, with
+    the first one as an obstacle; the first one's turn comes back only after every cube had one."""
+    cubes = (SeenCube(np.array([0.5, 0.1, 0.025]), "red"), SeenCube(np.array([0.4, -0.1, 0.025]), "blue"))
+    refused = CollisionError("no feasible pick-and-place for the red cube; tried 32 grasp/turn options")
+    cell = FakeCell(FakeVision(seen(cubes=cubes)), grasp=FakeGrasp(failures={0: refused}))
+    outcome = await cell.run(TaskKind.SORT_CUBES)
+    assert outcome.success and outcome.object_class == "cube_blue" and outcome.attempts == 2
+    assert [(c.target, c.alternative) for c in cell.grasp.calls] == [("cube_red", 0), ("cube_blue", 0)]
+    (box,) = cell.motion.requests[0].obstacles  # now the red cube is in the way
+    assert np.allclose((box.min[:2] + box.max[:2]) / 2, [0.5, 0.1])
 
 
 async def test_the_arm_is_brought_home_first_when_a_cycle_starts_elsewhere() -> None:
