@@ -215,6 +215,7 @@ class Orchestrator:
     ) -> bool:
         """Execute the plan, resuming it after cleared alarms; False: detect and plan again."""
         self._progress = Progress()
+        self._flowing = False
         try:
             return await self._carry_out_plan(planned, obs, out, attempts)
         finally:
@@ -237,7 +238,10 @@ class Orchestrator:
                     # a step failed while the arm flows on (the grasp check during LIFT): stop it now,
                     # not when the stream it was given runs dry and the driver's watchdog stops it
                     self._flowing = False
-                    await self.robot.stop()
+                    try:
+                        await self.robot.stop()
+                    except RobotError as stop_exc:  # the driver's watchdog still stops it
+                        log.warning("could not stop the arm flowing on after %s: %s", exc, stop_exc)
                 i = self._progress.index
                 holding = planned.plan.waypoints[i].holding  # the object is carried
                 # stopped again on the approach a contact already raised: the fingers press on a
