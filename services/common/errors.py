@@ -80,6 +80,12 @@ class GraspFailureError(ExecutionError):
     pass
 
 
+class PathDeviationError(ExecutionError):
+    """The execution monitor stopped the arm: it left its planned path (or the controller's reference) by
+    more than the path tolerance, as when something pushes on it. At a grasp approach: the fingers on the
+    object's edge or on a neighbour, and another grasp is planned."""
+
+
 class RobotBusyError(ExecutionError):
     """The arm is executing another motion: one stream at a time, a second request is refused, not queued."""
 

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from services.common.errors import ExecutionError
+from services.common.errors import ExecutionError, PathDeviationError
 from services.dobot import RobotMode
 from services.robot.feedback import FeedbackState
 
@@ -168,7 +168,7 @@ class StreamMonitor:
             if abs(dev.rad) > self.path_tolerance_rad:
                 n = self.targets_sent
                 return self._trip(
-                    ExecutionError(
+                    PathDeviationError(
                         f"execution monitor: {dev.describe()} the planned trajectory at step "
                         f"{self._dropped + k + 1}/{n} (path tolerance "
                         f"{np.rad2deg(self.path_tolerance_rad):.2f}°); arm stopped"
@@ -234,7 +234,7 @@ class MoveMonitor:
         dev = goal_deviation(fb.q, fb.q_target)
         self.max_path_deviation_rad = max(self.max_path_deviation_rad, abs(dev.rad))
         if abs(dev.rad) > self.path_tolerance_rad:
-            self.fault = ExecutionError(
+            self.fault = PathDeviationError(
                 f"execution monitor: {dev.describe()} the controller's reference (path tolerance "
                 f"{np.rad2deg(self.path_tolerance_rad):.2f}°); arm stopped"
             )

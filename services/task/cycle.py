@@ -31,6 +31,7 @@ from services.common.errors import (
     ControllerError,
     GraspFailureError,
     ObjectNotDetectedError,
+    PathDeviationError,
     PlanningError,
     RobotError,
     SafetyError,
@@ -244,9 +245,12 @@ class Orchestrator:
                         log.warning("could not stop the arm flowing on after %s: %s", exc, stop_exc)
                 i = self._progress.index
                 holding = planned.plan.waypoints[i].holding  # the object is carried
-                # stopped again on the approach a contact already raised: the fingers press on a
-                # neighbour, not on the table (raising more, or resuming, meets it again): another grasp
-                again = i in planned.touched and isinstance(exc, ControllerError)
+                # stopped again on the approach a contact already raised, or pushed off its path on a
+                # grasp approach: the fingers press on a neighbour or the object's edge, not on the table
+                # (raising more, or resuming, meets it again): another grasp
+                again = (i in planned.touched and isinstance(exc, ControllerError)) or (
+                    isinstance(exc, PathDeviationError) and grasp_approach(planned.plan, i)
+                )
                 action = decide(exc, attempts, self.config.limits, holding=holding, another_grasp=again)
                 out.error_code = type(exc).__name__
                 log.warning("execution failed in %s: %s → %s", self.state.value, exc, action.value)

@@ -13,6 +13,7 @@ from services.common.errors import (
     ControllerError,
     GraspFailureError,
     ObjectNotDetectedError,
+    PathDeviationError,
     PlanningError,
     RobotCommunicationError,
     SafetyError,
@@ -77,8 +78,9 @@ def decide(
     """The next action after ``error``; also counts the attempt it spends.
 
     ``another_grasp``: the failed step cannot be mended by doing it again (a grasp approach that met
-    something again after it was raised: not the table but a neighbour the fingers press on): a controller
-    error then spends a grasp option instead of an alarm retry.
+    something again after it was raised: not the table but a neighbour the fingers press on; one the
+    execution monitor stopped off its path): a controller error or a path deviation then spends a grasp
+    option instead of an alarm retry or the end of the cycle.
 
     ``holding``: the failed step carries the object (the gripper closed on it). A plan that cannot be
     made from there is not traded for another grasp, which backs off with the jaws open and would drop
@@ -88,7 +90,7 @@ def decide(
     attempts.history.append(f"{type(error).__name__}: {error}")
     if isinstance(error, SafetyError):
         return Action.WAIT_FOR_OPERATOR
-    if another_grasp and isinstance(error, ControllerError) and not holding:
+    if another_grasp and isinstance(error, ControllerError | PathDeviationError) and not holding:
         if attempts.grasp_variants < _budget(limits, "grasp_variants"):
             attempts.grasp_variants += 1
             return Action.NEXT_GRASP
