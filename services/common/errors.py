@@ -23,6 +23,11 @@ class InvalidInputError(RobotError, ValueError):
     grpc_code = grpc.StatusCode.INVALID_ARGUMENT
 
 
+class StartMismatchError(InvalidInputError):
+    """A trajectory that does not start where the arm is (or where the motion it continues ends):
+    nothing was sent; plan it again from the current state."""
+
+
 class ConfigurationError(RobotError):
     """Settings are missing, inconsistent or unsafe."""
 

@@ -31,6 +31,7 @@ from services.common.errors import (
     LimitViolationError,
     RobotBusyError,
     RobotCommunicationError,
+    StartMismatchError,
     TrajectoryExecutionError,
 )
 from services.common.settings import Settings
@@ -382,7 +383,7 @@ class RobotDriver(Supervision):
         self._continue_from = self._continue_tail = None
         start_err = float(np.max(np.abs(traj.positions[0] - q_now)))
         if not np.isfinite(start_err) or start_err > START_TOLERANCE_RAD:
-            raise InvalidInputError(
+            raise StartMismatchError(
                 f"trajectory starts {np.rad2deg(start_err):.2f}° away from the "
                 f"{'last queued target' if following else 'measured joints'} "
                 f"(tolerance {np.rad2deg(START_TOLERANCE_RAD):.1f}°); plan from the current state"

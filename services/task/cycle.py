@@ -35,6 +35,7 @@ from services.common.errors import (
     PlanningError,
     RobotError,
     SafetyError,
+    StartMismatchError,
     VisionError,
 )
 from services.common.modes import GripperCommand, MotionKind, TaskKind
@@ -381,9 +382,13 @@ class Orchestrator:
                             cfg.deadlines.motion_s,
                             f"motion to {w.name}",
                         )
-                    except ContinuationLateError as exc:
+                    except (ContinuationLateError, StartMismatchError) as exc:
                         # the motion this one flows from ended before it came (a busy planner, a slow
-                        # machine): the arm rests; from here to the end of the run is planned from rest
+                        # machine), or the arm rests off the plan's start (where the last move ended
+                        # was read before it settled): nothing was sent; from here to the end of the
+                        # run is planned from rest, once
+                        if in_motion and isinstance(exc, StartMismatchError):
+                            raise  # off the queued motion still under way: not mended from here
                         log.info("%s: %s", w.name, exc)
                         q_now = await self.robot.joints()
                         traj = await self._replan_run(planned, i, q_now, f"replanning {w.name} from rest")

@@ -10,6 +10,7 @@ from services.common.errors import (
     ExecutionError,
     InvalidInputError,
     LimitViolationError,
+    StartMismatchError,
     TrajectoryExecutionError,
 )
 from services.kinematics.interpolation import min_jerk_keypose_trajectory, quintic_move
@@ -112,7 +113,7 @@ async def test_trajectory_start_mismatch_and_overspeed_rejected(driver, sim_serv
         joint_names=driver.spec.joint_names,
         limits=limits(driver.spec),
     )
-    with pytest.raises(InvalidInputError, match="away from the measured joints"):
+    with pytest.raises(StartMismatchError, match="away from the measured joints"):
         await driver.execute_trajectory(far)
     fast = quintic_move(
         HOME, np.deg2rad([90, 0, 90, 0, -90, 0]), joint_names=driver.spec.joint_names, duration_s=0.2

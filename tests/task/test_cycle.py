@@ -172,3 +172,21 @@ async def test_a_continuation_that_came_too_late_is_planned_again_from_rest() ->
     moves = [c for c in cell.robot.commands if c[0] == "move"]
     assert moves[:3] == [("move", "PRE_GRASP", False), ("move", "GRASP", False), ("move", "GRASP", False)]
     assert len(cell.motion.requests) > planned_before + 3  # the plan's three requests and the replan
+
+
+async def test_a_plan_the_arm_rests_off_from_is_planned_again_from_where_it_rests() -> None:
+    """The driver refuses a trajectory that starts away from the measured joints (nothing is sent;
+    randomized stand-rod on a busy machine: 1.59° off after a stream resumed from rest): the cycle
+    plans that run again from where the arm rests and goes on, instead of ending the cycle."""
+    from services.common.errors import StartMismatchError
+    from tests.task.fakes import Fault
+
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))))
+    off = StartMismatchError("trajectory starts 1.59° away from the measured joints (tolerance 1.0°)")
+    cell.robot.faults[1] = Fault(off, at=0.0)  # GRASP, from rest at PRE_GRASP
+    planned_before = len(cell.motion.requests)
+    outcome = await cell.run()
+    assert outcome.success, outcome.failure_reason
+    moves = [c for c in cell.robot.commands if c[0] == "move"]
+    assert moves[:3] == [("move", "PRE_GRASP", False), ("move", "GRASP", False), ("move", "GRASP", False)]
+    assert len(cell.motion.requests) > planned_before + 3  # the plan's three requests and the replan
