@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from services.common.errors import CollisionError
+from services.common.errors import CollisionError, ContinuationLateError, StartMismatchError
 from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.task.ports import SeenCube
 from services.task.states import CycleState
@@ -156,34 +156,30 @@ async def test_the_arm_is_brought_home_first_when_a_cycle_starts_elsewhere() -> 
     assert cell.moves()[1] == "PRE_GRASP"
 
 
-async def test_a_continuation_that_came_too_late_is_planned_again_from_rest() -> None:
-    """The driver refuses a trajectory that flows from a motion that has already ended (a step in
-    speed); the cycle plans that run again from where the arm rests and goes on."""
-    from services.common.errors import ContinuationLateError
+@pytest.mark.parametrize(
+    ("refusal", "blending"),
+    [
+        # a trajectory that flows from a motion that has already ended (a step in speed)
+        (
+            ContinuationLateError("joint 3 would accelerate at 330°/s²: the motion it continues has ended"),
+            True,
+        ),
+        # one that starts away from the measured joints (randomized stand-rod on a busy machine: 1.59° off
+        # after a stream resumed from rest); before, the cycle ended
+        (StartMismatchError("trajectory starts 1.59° away from the measured joints (tolerance 1.0°)"), False),
+    ],
+    ids=["late-continuation", "start-mismatch"],
+)
+async def test_a_refused_trajectory_is_planned_again_from_where_the_arm_rests(
+    refusal: Exception, blending: bool
+) -> None:
+    """The driver refuses the trajectory to GRASP (nothing is sent); the cycle plans that run again from
+    where the arm rests and goes on."""
     from tests.task.fakes import Fault
 
     cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))))
-    cell.motion.blending = True
-    late = ContinuationLateError("joint 3 would accelerate at 330°/s²: the motion it continues has ended")
-    cell.robot.faults[1] = Fault(late, at=0.0)  # GRASP, which flows from PRE_GRASP
-    planned_before = len(cell.motion.requests)
-    outcome = await cell.run()
-    assert outcome.success, outcome.failure_reason
-    moves = [c for c in cell.robot.commands if c[0] == "move"]
-    assert moves[:3] == [("move", "PRE_GRASP", False), ("move", "GRASP", False), ("move", "GRASP", False)]
-    assert len(cell.motion.requests) > planned_before + 3  # the plan's three requests and the replan
-
-
-async def test_a_plan_the_arm_rests_off_from_is_planned_again_from_where_it_rests() -> None:
-    """The driver refuses a trajectory that starts away from the measured joints (nothing is sent;
-    randomized stand-rod on a busy machine: 1.59° off after a stream resumed from rest): the cycle
-    plans that run again from where the arm rests and goes on, instead of ending the cycle."""
-    from services.common.errors import StartMismatchError
-    from tests.task.fakes import Fault
-
-    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))))
-    off = StartMismatchError("trajectory starts 1.59° away from the measured joints (tolerance 1.0°)")
-    cell.robot.faults[1] = Fault(off, at=0.0)  # GRASP, from rest at PRE_GRASP
+    cell.motion.blending = blending
+    cell.robot.faults[1] = Fault(refusal, at=0.0)  # GRASP, which follows PRE_GRASP
     planned_before = len(cell.motion.requests)
     outcome = await cell.run()
     assert outcome.success, outcome.failure_reason
