@@ -258,7 +258,9 @@ class Orchestrator:
                 if action is Action.WAIT_FOR_OPERATOR:
                     raise
                 if action is Action.ABORT:
-                    await self._leave_safe()
+                    # a grasp found empty is let go: jaws left closed on a rod that slipped half out
+                    # would hold it askew where no next cycle can pick it
+                    await self._leave_safe(release=isinstance(exc, GraspFailureError))
                     raise CycleAborted(f"{self.state.value}: {exc}") from exc
                 await self.robot.recover()
                 if action is Action.CLEAR_AND_RESUME:
@@ -513,9 +515,15 @@ class Orchestrator:
         except RobotError as exc:
             log.warning("could not back off after a failed grasp: %s", exc)
 
-    async def _leave_safe(self) -> None:
-        """Before giving up: stop whatever moves; the arm stays where it is, enabled and idle."""
+    async def _leave_safe(self, release: bool = False) -> None:
+        """Before giving up: stop whatever moves; the arm stays where it is, enabled and idle (with its
+        jaws open when ``release``)."""
         try:
             await self.robot.stop()
         except RobotError as exc:
             log.warning("stop while aborting failed: %s", exc)
+        if release:
+            try:
+                await self._arm(self.robot.gripper(False), self.config.deadlines.gripper_s, "gripper open")
+            except RobotError as exc:
+                log.warning("opening the gripper while aborting failed: %s", exc)
