@@ -386,9 +386,9 @@ class Orchestrator:
                         )
                     except (ContinuationLateError, StartMismatchError) as exc:
                         # the motion this one flows from ended before it came (a busy planner, a slow
-                        # machine), or the arm rests off the plan's start (where the last move ended
-                        # was read before it settled): nothing was sent; from here to the end of the
-                        # run is planned from rest, once
+                        # machine), or the arm rests off the plan's start (seen after a ServoJ stream
+                        # resumed from rest on a busy machine): nothing was sent; from here to the end
+                        # of the run is planned from rest, once
                         if in_motion and isinstance(exc, StartMismatchError):
                             raise  # off the queued motion still under way: not mended from here
                         log.info("%s: %s", w.name, exc)
