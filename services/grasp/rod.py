@@ -19,7 +19,8 @@ densely sampled turn — simulated with the rod carried rigidly and lengthened b
 tolerance at both ends — and when one IK branch follows the whole path from pre-grasp to retract
 without jumps, within limits, with the elbow and wrist above the table, away from singularities
 and (with a collision checker) free of collisions, the rod included while held. The cheapest in
-joint motion wins. The lift height comes from the geometry: the far rod end must clear the
+joint motion wins. The turn happens over the grasp; when no option survives there, over the place
+position, then nearer the base (``inner_turn_radius_m``): the lift and turn become one move. The lift height comes from the geometry: the far rod end must clear the
 table when the rod swings down (≥ ``min_lift_m``; the notes: 0.10 m strikes, 0.15 m clears).
 """
 
@@ -155,9 +156,14 @@ def plan_pick_and_stand(
     lift = max(rc.min_lift_m, tip_height - tcp_z)
 
     T_tool_flange = invert_transform(T_flange_tool)
-    options = _build_options(a_h, center, grasp_pt, p_xy, lift, rod, cfg)
-    feasible = [o for o in options if not o.reason]
-    if feasible:
+    tried: list[_Option] = []
+    skipped = 0
+    for turn_xy in _turn_sites(grasp_pt, p_xy, cfg):
+        options = _build_options(a_h, center, grasp_pt, p_xy, lift, rod, cfg, turn_xy)
+        tried += options
+        feasible = [o for o in options if not o.reason]
+        if not feasible:
+            continue
         paths = np.stack([o.path for o in feasible]) @ T_tool_flange
         res = track_paths(spec, paths, home, track_limits(cfg), feasible[0].names)
         ranked: list[tuple[float, int]] = []
@@ -167,7 +173,6 @@ def plan_pick_and_stand(
             else:
                 o.reason, o.kind = res.reason[b], "ik"
         ranked.sort()
-        skipped = 0
         for cost, b in ranked:
             o = feasible[b]
             q_path = res.q[b]
@@ -182,11 +187,31 @@ def plan_pick_and_stand(
             return _assemble(
                 spec, o, q_path, home, cost, lift, rod, cfg, T_flange_tool, stroke_m, p_xy, len(ranked)
             )
-        if skipped:
-            raise PlanningError(
-                f"alternative {alternative} requested but the rod has only {skipped} feasible wrist option(s)"
-            )
-    raise _no_plan_error(rod, center, options)
+    if skipped:
+        raise PlanningError(
+            f"alternative {alternative} requested but the rod has only {skipped} feasible wrist option(s)"
+        )
+    raise _no_plan_error(rod, center, tried)
+
+
+def _turn_sites(grasp_pt: Array, p_xy: Array, cfg: GraspSettings) -> list[Array]:
+    """Where the rod may be turned upright, in order of preference: over the grasp (the shortest
+    carry lying down), over the place position, then either pulled in to ``inner_turn_radius_m``
+    from the base. A rod 0.5 m out along the base's y axis has no IK branch for the turn over the
+    grasp that keeps the elbow and wrist off the table (7 of 1,000 randomized trials refused)."""
+    sites: list[Array] = []
+    inner = cfg.rod.inner_turn_radius_m
+    for xy in (grasp_pt[:2], p_xy):
+        sites.append(np.asarray(xy, dtype=float).copy())
+    for xy in (grasp_pt[:2], p_xy):
+        r = float(np.linalg.norm(xy))
+        if r > inner:
+            sites.append(np.asarray(xy, dtype=float) * (inner / r))
+    unique: list[Array] = []
+    for xy in sites:  # a site within a path step of an earlier one adds nothing
+        if all(float(np.linalg.norm(xy - u)) > cfg.path_step_m for u in unique):
+            unique.append(xy)
+    return unique
 
 
 # --- checks ---------------------------------------------------------------------------------------
@@ -230,6 +255,7 @@ def _build_options(
     lift: float,
     rod: RodObservation,
     cfg: GraspSettings,
+    turn_xy: Array,
 ) -> list[_Option]:
     rc, g = cfg.rod, cfg.gripper
     r, half = rod.diameter / 2, rod.length / 2
@@ -259,7 +285,7 @@ def _build_options(
                 heading = radial + k * 2 * math.pi / n_head
                 z_t = np.array([math.cos(heading), math.sin(heading), 0.0])
                 R_final = np.column_stack([eps * UP, np.cross(z_t, eps * UP), z_t])  # rod axis vertical
-                T_turn = pose(R_final, T_lift[:3, 3])
+                T_turn = pose(R_final, np.array([turn_xy[0], turn_xy[1], T_lift[2, 3]]))
                 ends = np.stack([c_t + half * u_t, c_t - half * u_t])
                 low_end = ends[int(np.argmin((R_final @ ends.T)[2]))]
                 p_place = np.array([p_xy[0], p_xy[1], table]) - R_final @ low_end
@@ -298,7 +324,7 @@ def _build_options(
     counts = {
         ("PRE_GRASP", "GRASP"): math.ceil(cfg.approach_distance_m / step),
         ("GRASP", "LIFT"): math.ceil(lift / step),
-        ("LIFT", "REORIENT"): turn_n,
+        ("LIFT", "REORIENT"): max(turn_n, math.ceil(float(np.linalg.norm(turn_xy - grasp_pt[:2])) / step)),
         ("REORIENT", "CARRY"): max(1, math.ceil(transit_len / step)),
         ("CARRY", "PLACE_ABOVE"): max(1, math.ceil(max(rc.carry_raise_m, lift) / step)),
         ("PLACE_ABOVE", "PLACE_LOW"): max(1, math.ceil((rc.place_approach_m + rc.guard_overtravel_m) / step)),

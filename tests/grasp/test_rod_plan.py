@@ -278,3 +278,42 @@ def test_a_rod_seen_above_the_configured_table_is_gripped_at_its_axis(seen_above
     axis_z = CFG.table_z_m + dz + D / 2
     assert tcp_z - axis_z <= g.pad_height_m / 2 + 1e-9  # the pads reach the axis
     assert tcp_z - g.fingertip_beyond_tcp_m >= CFG.table_z_m + dz + g.table_clearance_m - 1e-9
+
+
+# Randomized eval seed 1478 (table, cubes and rod as the grasp service saw them): a rod 0.54 m out
+# lying along the base's y axis has no turn over the grasp that keeps the arm off the table and the
+# cubes; 7 of 1,000 randomized trials were refused at PLAN like this.
+FAR_ROD = RodObservation.create(
+    [0.54337063758956949, 0.094738607152590637, 0.011854942279620584],
+    [-0.12175453262377152, 0.99256011990540427, -0.0004920964704486062],
+    0.20045413543577795,
+    0.022096778087140445,
+)
+FAR_ROD_PLACE = [0.39343145750507624, 0.05656854249492381]
+FAR_ROD_SCENE = [
+    Box((0.27968, 0.29079, -0.00965), (0.50972, 0.37067, 0.13849), "obstacle0"),
+    Box((0.40831, -0.19067, 0.0), (0.45831, -0.14067, 0.05074), "obstacle1"),
+    Box((0.42622, 0.11445, 0.0), (0.47622, 0.16445, 0.05068), "obstacle2"),
+    Box((0.44184, -0.03188, 0.0), (0.49184, 0.01812, 0.05075), "obstacle3"),
+    Box((0.52279, -0.17778, 0.0), (0.57279, -0.12778, 0.05093), "obstacle4"),
+]
+
+
+def test_a_far_rod_along_y_is_turned_upright_nearer_the_base(monkeypatch: pytest.MonkeyPatch) -> None:
+    import services.grasp.rod as rod_planner
+
+    check = MotionCollisionCheck.from_settings(SETTINGS, FAR_ROD_SCENE)
+    p = plan(FAR_ROD, collision_check=check, place_xy=FAR_ROD_PLACE)
+    w = {x.name: x for x in p.waypoints}
+    grasp_xy, turn_xy = w["GRASP"].T_base_tool[:2, 3], w["REORIENT"].T_base_tool[:2, 3]
+    assert np.linalg.norm(turn_xy - grasp_xy) > 0.05  # turned elsewhere than over the grasp ...
+    assert np.linalg.norm(turn_xy) < np.linalg.norm(grasp_xy) - 0.05  # ... and nearer the base
+    for x in p.waypoints:
+        held = p.held if x.holding else None
+        assert not check(x.q, held), f"{x.name}: {check.explain(x.q, held)}"
+    assert p.notes["min_rod_clearance_m"] >= CFG.rod.turn_clearance_m - 1e-9
+
+    only_over_the_grasp = rod_planner._turn_sites
+    monkeypatch.setattr(rod_planner, "_turn_sites", lambda g, xy, cfg: only_over_the_grasp(g, xy, cfg)[:1])
+    with pytest.raises(CollisionError, match="no feasible pick-and-stand"):
+        plan(FAR_ROD, collision_check=check, place_xy=FAR_ROD_PLACE)

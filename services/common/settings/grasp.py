@@ -82,6 +82,13 @@ class RodStandSettings(Model):
     turn_step_deg: float = Field(
         4.0, gt=0, le=10, description="orientation step of the turn checks (motion executes it densely)"
     )
+    inner_turn_radius_m: float = Field(
+        0.40,
+        gt=0.1,
+        le=1.0,
+        description="when no turn over the grasp or the place position plans, turn this far from the base "
+        "(on the bearing of either): a far rod's turn keeps the elbow off the table there",
+    )
 
     @model_validator(mode="after")
     def _guard_starts_above(self) -> RodStandSettings:
