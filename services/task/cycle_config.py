@@ -28,3 +28,5 @@ class CycleConfig:
     # camera calibration error of +-0.5 deg is +-6 mm at the rod) is retried this much higher, each time
     contact_raise_m: float = 0.003
     home_joints: tuple[float, ...] | None = None  # rad; each cycle starts here (clear camera view)
+    # rad/s², per joint: the driver's acceleration limits, which a retimed (paced) touch-down keeps
+    max_joint_acceleration: tuple[float, ...] | None = None

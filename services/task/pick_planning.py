@@ -54,6 +54,8 @@ class PickPlanning:
 
     def __init__(self, grasp: GraspPort, motion: MotionPort, config: CycleConfig, view: ArmView | None):
         self.grasp, self.motion, self.config, self.view = grasp, motion, config, view
+        acc = config.max_joint_acceleration
+        self._max_acc = np.asarray(acc, dtype=float) if acc is not None else None
 
     async def plan(
         self, task: TaskKind, obs: Observation, out: PickOutcome, alternative: int, q: np.ndarray
@@ -184,7 +186,12 @@ class PickPlanning:
                     float(np.dot((await self.motion.tool_pose(q))[:3, 3] - p0, along)) for q in traj.positions
                 ]
                 return paced_on_line(
-                    traj, np.asarray(along_line), w.guard_approach_speed_m_s, w.guard_speed_m_s, band_from
+                    traj,
+                    np.asarray(along_line),
+                    w.guard_approach_speed_m_s,
+                    w.guard_speed_m_s,
+                    band_from,
+                    max_joint_acceleration=self._max_acc,
                 )
             # a guarded approach goes no faster than the grasp plan's touch-down speed
             dist = float(np.linalg.norm(move.target[:3, 3] - p0))

@@ -81,6 +81,7 @@ def cycle_config(settings: Settings) -> CycleConfig:
         jaw_footprint_m=(settings.motion.tool.finger_box_m[0], settings.motion.tool.finger_box_m[1]),
         jaw_clearance_m=settings.motion.padding_m,
         home_joints=tuple(float(np.deg2rad(v)) for v in home_deg) if home_deg is not None else None,
+        max_joint_acceleration=tuple(float(a) for a in get_robot(settings.robot.model).max_acceleration),
     )
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from services.kinematics.trajectory import JointTrajectory
-from services.task.pacing import paced_on_line
+from services.task.pacing import acceleration_ratio, paced_on_line
 
 
 def _line(n: int = 51, length: float = 0.05, duration: float = 0.5) -> tuple[JointTrajectory, np.ndarray]:
@@ -37,3 +37,37 @@ def test_the_approach_is_no_faster_than_planned() -> None:
     traj, d = _line(duration=2.0)  # planned peak 0.0375 m/s
     paced = paced_on_line(traj, d, approach_m_s=0.15, touch_m_s=0.025, band_from_m=0.03)
     assert np.max(np.abs(paced.velocities[:, 0])) <= 0.0375 + 1e-6
+
+
+def test_the_pace_keeps_the_joint_acceleration_limits() -> None:
+    # joint b turns 20 rad per metre of tool travel (near a singularity): the tool's 1 m/s² speed-up
+    # asks it for ~20 rad/s², which the driver would refuse against a 5 rad/s² limit
+    traj, d = _line(duration=1.0)
+    traj = JointTrajectory(
+        ("a", "b"), traj.times, traj.positions * [1.0, 10.0], traj.velocities, traj.accelerations
+    )
+    limit = np.array([50.0, 5.0])
+    free = paced_on_line(traj, d, approach_m_s=0.15, touch_m_s=0.025, band_from_m=0.03)
+    assert acceleration_ratio(free, limit) > 1.5
+    kept = paced_on_line(
+        traj, d, approach_m_s=0.15, touch_m_s=0.025, band_from_m=0.03, max_joint_acceleration=limit
+    )
+    assert acceleration_ratio(kept, limit) <= 1.0
+    assert np.allclose(kept.positions, traj.positions)  # the same path, only slower changes of speed
+    band = d >= 0.03
+    assert np.max(np.abs(kept.velocities[band, 0])) <= 0.025 + 1e-9  # never faster through the band
+    assert free.duration < kept.duration
+
+
+def test_a_pace_within_the_limits_is_left_as_it_is() -> None:
+    traj, d = _line()
+    free = paced_on_line(traj, d, approach_m_s=0.15, touch_m_s=0.025, band_from_m=0.03)
+    kept = paced_on_line(
+        traj,
+        d,
+        approach_m_s=0.15,
+        touch_m_s=0.025,
+        band_from_m=0.03,
+        max_joint_acceleration=np.array([1e3, 1e3]),
+    )
+    assert np.array_equal(kept.times, free.times) and np.array_equal(kept.velocities, free.velocities)
