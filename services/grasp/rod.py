@@ -20,8 +20,9 @@ tolerance at both ends — and when one IK branch follows the whole path from pr
 without jumps, within limits, with the elbow and wrist above the table, away from singularities
 and (with a collision checker) free of collisions, the rod included while held. The cheapest in
 joint motion wins. The turn happens over the grasp; when no option survives there, over the place
-position, then nearer the base (``inner_turn_radius_m``): the lift and turn become one move. The lift height comes from the geometry: the far rod end must clear the
-table when the rod swings down (≥ ``min_lift_m``; the notes: 0.10 m strikes, 0.15 m clears).
+position, then nearer the base (``inner_turn_radius_m``), the rod carried there as it turns. The
+lift height comes from the geometry: the far rod end must clear the table when the rod swings down
+(≥ ``min_lift_m``; the notes: 0.10 m strikes, 0.15 m clears).
 """
 
 from __future__ import annotations

@@ -14,6 +14,8 @@ import numpy as np
 from services.kinematics.trajectory import Array, JointTrajectory
 
 TOOL_ACCELERATION_M_S2 = 1.0  # speed changes along the line (gentle on a carried object)
+REPACE_TRIES = 4  # gentler speed changes tried before the pace is slowed as a whole
+REPACE_MARGIN = 1.02
 
 
 def tool_speed_profile(
@@ -46,8 +48,8 @@ def paced_on_line(
 
     With ``max_joint_acceleration`` (rad/s², what the driver will check) the retimed motion keeps every
     joint within it: the tool's speed changes are made gentler until it does, and a pace still above it
-    is slowed as a whole. A tool acceleration of 1 m/s² near a wrist singularity asked joint 2 for
-    322 °/s² against 300: the driver refused the touch-down (randomized eval seeds 1829, 1974)."""
+    is slowed as a whole. Seen: the tool's 1 m/s² speed-up asked joint 2 for 322 °/s² against its 300, and
+    the driver refused the touch-down (randomized eval seeds 1829, 1974)."""
     d = np.maximum.accumulate(np.asarray(distance, dtype=float))
     keep = np.concatenate([[True], np.diff(d) > 1e-7])
     keep[-1] = True
@@ -65,15 +67,11 @@ def paced_on_line(
         ratio = acceleration_ratio(paced, limit)
         if ratio <= 1.0:
             return paced
-        accel /= ratio * REPACE_MARGIN  # the speed changes dominate: gentler ones
+        accel /= ratio * REPACE_MARGIN  # the joint acceleration grows with the tool's
         paced = _paced(traj, q, d, approach, touch_m_s, band_from_m, accel)
     ratio = acceleration_ratio(paced, limit)
     # still above (the line's curvature at speed): slowed as a whole, acceleration / k²
     return paced.scaled(math.sqrt(ratio) * REPACE_MARGIN) if ratio > 1.0 else paced
-
-
-REPACE_TRIES = 4
-REPACE_MARGIN = 1.02
 
 
 def acceleration_ratio(traj: JointTrajectory, max_joint_acceleration: Array) -> float:
