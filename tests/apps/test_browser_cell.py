@@ -144,7 +144,12 @@ async def test_operator_panel_on_pickplace_up(tmp_path):
 
                 # speed ratio through PUT /config
                 await page.locator("#speed-range").fill("35")
-                await page.get_by_role("button", name="apply the speed ratio").click()
+                # the output shows what the slider says at once: the PUT's answer is the event to wait for
+                async with page.expect_response(
+                    lambda r: r.url.endswith("/api/v1/config") and r.request.method == "PUT", timeout=30_000
+                ) as put:
+                    await page.get_by_role("button", name="apply the speed ratio").click()
+                assert (await put.value).ok
                 await expect(tid("speed-ratio")).to_have_text("35 %")
                 assert (await api.get("/api/v1/config")).json()["robot"]["speed_ratio"] == 35
 
