@@ -8,8 +8,8 @@ import pytest
 from services.common.errors import CollisionDetectedError, ExecutionError, InvalidInputError
 from services.sim.engine import EngineState, MotionEngine
 from services.sim.twin import TwinEngine, create_twin_engine
-from services.sim.twin.engine import OBJECT_DETECT_MAX_SPEED_M_S
 from services.sim.twin import ground_truth as gt
+from services.sim.twin.engine import OBJECT_DETECT_MAX_SPEED_M_S
 from services.sim.twin.trial import TICK_S, ScriptedArm
 from tests.sim.twin_helpers import HOME, top_down_tool, twin_settings
 
