@@ -464,13 +464,42 @@ class Orchestrator:
         q = await self.robot.joints()
         if near(q, home) or self._planning.clear(q):
             return
-        traj = await self._timed(
-            self._planning.single(q, Move(MotionKind.JOINT, home, label="SAFE_HOME"), ()),
-            self.config.deadlines.plan_s,
-            "planning the way to safe home",
-        )
-        if traj is not None:
-            await self._arm(self.robot.execute(traj), self.config.deadlines.motion_s, "moving to safe home")
+        # straight up first: nothing is known of the table yet, and an aborted cycle can leave the jaws
+        # beside a box (sorting cubes: the joint move home swept through the wall, alarm 117, and the
+        # next two trials were lost the same way)
+        go_home = Move(MotionKind.JOINT, home, label="SAFE_HOME")
+        moves = [go_home]
+        T = await self.motion.tool_pose(q)
+        if T[2, 3] < self.config.home_rise_to_m:
+            moves.insert(
+                0,
+                Move(
+                    MotionKind.LINEAR,
+                    raised(T, self.config.home_rise_to_m - T[2, 3]),
+                    label="RISE",
+                    blend=True,
+                ),
+            )
+        what = "planning the way to safe home"
+        try:
+            trajs = await self._timed(
+                self.motion.plan_moves(q, moves, ()), self.config.deadlines.plan_s, what
+            )
+        except PlanningError as exc:
+            if len(moves) == 1:
+                raise
+            log.info("no straight way up before going home (%s): straight home", exc)
+            trajs = [
+                await self._timed(self._planning.single(q, go_home, ()), self.config.deadlines.plan_s, what)
+            ]
+        for k, traj in enumerate(trajs):
+            if traj is not None:
+                flows = k + 1 < len(trajs) and ends_in_motion(traj)
+                await self._arm(
+                    self.robot.execute(traj, continues=flows),
+                    self.config.deadlines.motion_s,
+                    "moving to safe home",
+                )
 
     async def _return_home(self, planned: PlannedPick, obs: Observation) -> None:
         """DONE: out of the camera's view of the table — where the plan's way home ended, or back to

@@ -28,5 +28,8 @@ class CycleConfig:
     # camera calibration error of +-0.5 deg is +-6 mm at the rod) is retried this much higher, each time
     contact_raise_m: float = 0.003
     home_joints: tuple[float, ...] | None = None  # rad; each cycle starts here (clear camera view)
+    # a cycle that starts away from home first rises straight up to this tool height (m), clear of the
+    # boxes on the table (an aborted cycle may have left the jaws beside one)
+    home_rise_to_m: float = 0.25
     # rad/s², per joint: the driver's acceleration limits, which a retimed (paced) touch-down keeps
     max_joint_acceleration: tuple[float, ...] | None = None

@@ -156,6 +156,20 @@ async def test_the_arm_is_brought_home_first_when_a_cycle_starts_elsewhere() -> 
     assert cell.moves()[1] == "PRE_GRASP"
 
 
+async def test_a_cycle_starting_low_rises_straight_up_before_going_home() -> None:
+    # where an aborted cycle left it: the jaws low beside a box nobody has looked at yet
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))))
+    cell.robot.q = np.array([0.5, 0.1, 0.05, 0.0, 0.0, 0.0])  # the toy arm's tool at z = 0.05 m
+    outcome = await cell.run()
+    assert outcome.success
+    first = cell.motion.requests[0]
+    assert first.labels == ["RISE", "SAFE_HOME"]
+    rise = first.moves[0]
+    assert rise.kind is MotionKind.LINEAR and rise.blend
+    assert np.allclose(rise.target[:3, 3], [0.5, 0.1, cell.orchestrator.config.home_rise_to_m])  # straight up
+    assert cell.robot.commands[1:3] == [("move", "RISE", False), ("move", "SAFE_HOME", False)]
+
+
 @pytest.mark.parametrize(
     ("refusal", "blending"),
     [
