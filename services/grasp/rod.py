@@ -200,14 +200,9 @@ def _turn_sites(grasp_pt: Array, p_xy: Array, cfg: GraspSettings) -> list[Array]
     carry lying down), over the place position, then either pulled in to ``inner_turn_radius_m``
     from the base. A rod 0.5 m out along the base's y axis has no IK branch for the turn over the
     grasp that keeps the elbow and wrist off the table (7 of 1,000 randomized trials refused)."""
-    sites: list[Array] = []
     inner = cfg.rod.inner_turn_radius_m
-    for xy in (grasp_pt[:2], p_xy):
-        sites.append(np.asarray(xy, dtype=float).copy())
-    for xy in (grasp_pt[:2], p_xy):
-        r = float(np.linalg.norm(xy))
-        if r > inner:
-            sites.append(np.asarray(xy, dtype=float) * (inner / r))
+    ends = [np.asarray(grasp_pt[:2], dtype=float), np.asarray(p_xy, dtype=float)]
+    sites = ends + [xy * (inner / np.linalg.norm(xy)) for xy in ends if np.linalg.norm(xy) > inner]
     unique: list[Array] = []
     for xy in sites:  # a site within a path step of an earlier one adds nothing
         if all(float(np.linalg.norm(xy - u)) > cfg.path_step_m for u in unique):

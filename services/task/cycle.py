@@ -63,6 +63,7 @@ from services.task.ports import (
     Move,
     Observation,
     RobotPort,
+    SeenBox,
     VisionPort,
 )
 from services.task.recording import RecordingRobot
@@ -72,6 +73,7 @@ from services.task.states import CycleState, PickOutcome
 log = logging.getLogger("pickplace.task.cycle")
 
 T = TypeVar("T")
+BACK_OFF_M = 0.08  # straight up out of a failed grasp before the way home
 
 StateListener = Callable[[CycleState, str], None]
 Wait = Callable[[float], Awaitable[None]]
@@ -467,39 +469,14 @@ class Orchestrator:
         # straight up first: nothing is known of the table yet, and an aborted cycle can leave the jaws
         # beside a box (sorting cubes: the joint move home swept through the wall, alarm 117, and the
         # next two trials were lost the same way)
-        go_home = Move(MotionKind.JOINT, home, label="SAFE_HOME")
-        moves = [go_home]
-        T = await self.motion.tool_pose(q)
-        if T[2, 3] < self.config.home_rise_to_m:
-            moves.insert(
-                0,
-                Move(
-                    MotionKind.LINEAR,
-                    raised(T, self.config.home_rise_to_m - T[2, 3]),
-                    label="RISE",
-                    blend=True,
-                ),
-            )
-        what = "planning the way to safe home"
+        rise = self.config.home_rise_to_m - float((await self.motion.tool_pose(q))[2, 3])
         try:
-            trajs = await self._timed(
-                self.motion.plan_moves(q, moves, ()), self.config.deadlines.plan_s, what
-            )
+            await self._up_then_home(q, rise, home, (), "RISE", "the way to safe home")
         except PlanningError as exc:
-            if len(moves) == 1:
+            if rise <= 0.0:
                 raise
             log.info("no straight way up before going home (%s): straight home", exc)
-            trajs = [
-                await self._timed(self._planning.single(q, go_home, ()), self.config.deadlines.plan_s, what)
-            ]
-        for k, traj in enumerate(trajs):
-            if traj is not None:
-                flows = k + 1 < len(trajs) and ends_in_motion(traj)
-                await self._arm(
-                    self.robot.execute(traj, continues=flows),
-                    self.config.deadlines.motion_s,
-                    "moving to safe home",
-                )
+            await self._up_then_home(q, 0.0, home, (), "RISE", "the way to safe home")
 
     async def _return_home(self, planned: PlannedPick, obs: Observation) -> None:
         """DONE: out of the camera's view of the table — where the plan's way home ended, or back to
@@ -531,18 +508,38 @@ class Orchestrator:
         view of the table, before looking again (an arm over the table hides the rod it let go of)."""
         await self.robot.gripper(False)
         q = await self.robot.joints()
-        home = planned.home
         try:
-            up = raised(await self.motion.tool_pose(q), 0.08)
-            moves = [Move(MotionKind.LINEAR, up, label="BACK_OFF", blend=home is not None)]
-            if home is not None:
-                moves.append(Move(MotionKind.JOINT, home, label="SAFE_HOME"))
-            trajs = await self.motion.plan_moves(q, moves, planned.obstacles)
-            for k, traj in enumerate(trajs):
-                if traj is not None:
-                    await self.robot.execute(traj, continues=k + 1 < len(trajs) and ends_in_motion(traj))
+            await self._up_then_home(
+                q, BACK_OFF_M, planned.home, planned.obstacles, "BACK_OFF", "backing off"
+            )
         except RobotError as exc:
             log.warning("could not back off after a failed grasp: %s", exc)
+
+    async def _up_then_home(
+        self,
+        q: np.ndarray,
+        rise_m: float,
+        home: np.ndarray | None,
+        obstacles: tuple[SeenBox, ...],
+        label: str,
+        what: str,
+    ) -> None:
+        """Straight up by ``rise_m`` (none when ≤ 0), flowing on into the joint move to ``home`` (if any),
+        planned in one request and executed under the cycle's deadlines."""
+        moves: list[Move] = []
+        if rise_m > 0.0:
+            up = raised(await self.motion.tool_pose(q), rise_m)
+            moves.append(Move(MotionKind.LINEAR, up, label=label, blend=home is not None))
+        if home is not None:
+            moves.append(Move(MotionKind.JOINT, home, label="SAFE_HOME"))
+        if not moves:
+            return
+        cfg = self.config.deadlines
+        trajs = await self._timed(self.motion.plan_moves(q, moves, obstacles), cfg.plan_s, f"planning {what}")
+        for k, traj in enumerate(trajs):
+            if traj is not None:
+                flows = k + 1 < len(trajs) and ends_in_motion(traj)
+                await self._arm(self.robot.execute(traj, continues=flows), cfg.motion_s, what)
 
     async def _leave_safe(self, release: bool = False) -> None:
         """Before giving up: stop whatever moves; the arm stays where it is, enabled and idle (with its

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from services.kinematics.trajectory import Array, JointTrajectory
 
@@ -41,7 +42,7 @@ def paced_on_line(
     touch_m_s: float,
     band_from_m: float,
     accel: float = TOOL_ACCELERATION_M_S2,
-    max_joint_acceleration: Array | None = None,
+    max_joint_acceleration: ArrayLike | None = None,
 ) -> JointTrajectory:
     """``traj`` (a straight tool line; ``distance`` the tool's distance from the start at each knot)
     retimed to the two-stage pace, the approach no faster than the planned peak tool speed.
@@ -74,13 +75,13 @@ def paced_on_line(
     return paced.scaled(math.sqrt(ratio) * REPACE_MARGIN) if ratio > 1.0 else paced
 
 
-def acceleration_ratio(traj: JointTrajectory, max_joint_acceleration: Array) -> float:
+def acceleration_ratio(traj: JointTrajectory, max_joint_acceleration: ArrayLike) -> float:
     """The largest |joint acceleration| of ``traj`` (knots and the peaks between them) over its limit."""
     acc = np.abs(traj.accelerations)
     if len(traj) > 1:
         peaks, _ = traj.acceleration_peaks()
         acc = np.vstack([acc, np.abs(peaks)])
-    return float(np.max(acc / max_joint_acceleration))
+    return float(np.max(acc / np.asarray(max_joint_acceleration, dtype=float)))
 
 
 def _paced(

@@ -54,8 +54,6 @@ class PickPlanning:
 
     def __init__(self, grasp: GraspPort, motion: MotionPort, config: CycleConfig, view: ArmView | None):
         self.grasp, self.motion, self.config, self.view = grasp, motion, config, view
-        acc = config.max_joint_acceleration
-        self._max_acc = np.asarray(acc, dtype=float) if acc is not None else None
 
     async def plan(
         self, task: TaskKind, obs: Observation, out: PickOutcome, alternative: int, q: np.ndarray
@@ -191,7 +189,7 @@ class PickPlanning:
                     w.guard_approach_speed_m_s,
                     w.guard_speed_m_s,
                     band_from,
-                    max_joint_acceleration=self._max_acc,
+                    max_joint_acceleration=self.config.max_joint_acceleration,
                 )
             # a guarded approach goes no faster than the grasp plan's touch-down speed
             dist = float(np.linalg.norm(move.target[:3, 3] - p0))
