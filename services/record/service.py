@@ -149,6 +149,7 @@ class RecordService(ServiceShell):
         self.dropped = 0
         self.converted = 0
         self.errors = 0
+        self.last_joint_seq = -1  # the header seq of the last joint state taken (converter thread)
         self._live_context: foxglove.Context | None = None
         self._live_channels: dict[Topic, foxglove.Channel] = {}
         self._queue: queue.Queue[Item] = queue.Queue(maxsize=rs.queue_size)
@@ -394,6 +395,7 @@ class RecordService(ServiceShell):
     def _joints(self, payload: bytes, t: int) -> None:
         self._emit(Topic.JOINT_STATES, payload, t)
         js = common_pb2.JointState.FromString(payload)
+        self.last_joint_seq = js.header.seq
         rate = self.settings.record.foxglove.tf_rate_hz
         at = js.source_stamp_ns or t  # decimated on the controller's clock: the same states however loaded
         if (rate <= 0 or abs(at - self._last_tf_ns) >= 1e9 / rate) and self._wanted(Topic.TF):

@@ -29,6 +29,7 @@ from services.record.service import RecordService
 from services.record.writer import RecordingStopped
 from tests.apps.conftest import cell_settings
 from tests.conftest import free_port
+from tests.gateway.conftest import wait_until
 from tests.record.wsclient import FoxgloveClient
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
@@ -118,6 +119,12 @@ async def test_a_twin_cycle_is_live_in_foxglove_and_recorded_and_replays(
             outcome = await cell.task.runner.run_cycle(TaskKind.STAND_ROD)  # type: ignore[union-attr]
             await cell.settle(0.5)  # the last states and the pick event reach the view
         heard.undeclare()
+        # a state the test heard last may still be on its way into the recorder (another subscriber of the
+        # same bus): leave only once the recorder has taken it, or stopping the recorder could drop it
+        last = max(published)
+        await wait_until(
+            lambda: view.last_joint_seq >= last, 60.0, f"the recorder to take joint state {last}"
+        )
     # the cell carried on through the full disk: the cycle ran to its outcome (its success is
     # test_cell's business; here the arm must have moved and the outcome must have been published)
     assert outcome.stage_reached not in ("INIT", "DETECT", "PLAN"), outcome.failure_reason
