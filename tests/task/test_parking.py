@@ -64,6 +64,19 @@ async def test_a_seen_box_around_the_parked_arm_is_not_an_obstacle() -> None:
     assert np.allclose(box.min, wall.min) and np.allclose(box.max, wall.max)
 
 
+async def test_a_seen_box_around_the_arm_at_the_safe_home_is_not_an_obstacle() -> None:
+    """The safe home is out of the pick zone's view, yet the image edge may catch the arm there."""
+    arm_box = SeenBox(HOME[:3] - [0.02, 0.02, HOME[2]], HOME[:3] + 0.02)  # the arm, stood on the table
+    wall = SeenBox(np.array([0.20, 0.30, 0.0]), np.array([0.30, 0.40, 0.10]))
+    obs = seen(rod_at(0.5, 0.1))
+    cell = FakeCell(FakeVision(type(obs)(rods=obs.rods, obstacles=(arm_box, wall))), view=FakeView())
+    cell.robot.q = HOME.copy()
+    outcome = await cell.run()
+    assert outcome.success
+    (box,) = cell.motion.requests[0].obstacles
+    assert np.allclose(box.min, wall.min) and np.allclose(box.max, wall.max)
+
+
 class ArmOverTheWall(FakeView):
     """The arm reaches into the wall's seen box (grown by the own-box pad) while the tool is below 0.31 m."""
 

@@ -66,6 +66,19 @@ def test_a_box_around_the_arm_is_the_arm_and_a_box_elsewhere_is_not() -> None:
     assert not view.holds_arm(q, np.array([0.55, 0.20, 0.0]), np.array([0.60, 0.25, 0.05]))
 
 
+def test_the_column_vision_stood_under_the_elbow_at_the_safe_home_is_the_arm() -> None:
+    """Seed 1706: under a camera a few tenths of a degree off, the top image rows caught the elbow of the
+    arm at the safe home; vision stood it on the table as a 0.39 m column beside the rod."""
+    view = view_check(Settings())
+    assert view is not None
+    home = np.radians([180.0, 0.0, 90.0, 0.0, -90.0, 0.0])
+    assert view.clear(home)  # the pick zone's view is clear; only the image edge sees the elbow
+    assert view.holds_arm(home, np.array([0.501, 0.116, -0.017]), np.array([0.527, 0.154, 0.387]))
+    # the real boxes of that scene (the tall blue obstacle, a cube) are not the arm
+    assert not view.holds_arm(home, np.array([0.281, 0.296, -0.02]), np.array([0.52, 0.38, 0.135]))
+    assert not view.holds_arm(home, np.array([0.366, -0.143, -0.01]), np.array([0.42, -0.09, 0.052]))
+
+
 def test_the_camera_model_can_be_turned_off() -> None:
     s = Settings()
     assert (
