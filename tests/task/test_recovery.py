@@ -409,6 +409,21 @@ async def test_a_slip_found_while_the_arm_flows_on_from_lift_stops_it_before_bac
     assert cell.robot.commands.count(("stop",)) == 1
 
 
+async def test_an_object_lost_on_the_way_is_found_missing_before_the_touch_down_and_regrasped() -> None:
+    """Seed 1910: the fingers closed on the table beside the rod (the sensor said "held") and slid shut
+    while the arm turned; the touch-down found nothing, the jaws opened on nothing, and the cycle reported
+    the rod placed. The sensor is asked again before the touch-down."""
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))), robot=FakeRobot(holding_script=[True, False, True]))
+    outcome = await cell.run()
+    assert outcome.success and outcome.attempts == 2 and outcome.error_code == "GraspFailureError"
+    moves = cell.moves()
+    first_place = moves.index("PLACE")
+    assert moves.index("REORIENT") < moves.index("BACK_OFF") < first_place  # no touch-down empty-handed
+    assert moves.count("PLACE") == 1 and moves.count("LIFT") == 2
+    s = cell.states
+    assert s[s.index(CycleState.PLACE) + 1] is CycleState.DETECT  # looked again, then the second grasp
+
+
 async def test_a_slip_beyond_the_regrasp_budget_aborts_open_handed() -> None:
     cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))), robot=FakeRobot(holding_script=[False]))
     outcome = await cell.run()
