@@ -26,13 +26,14 @@ from services.common.messages import pose_to_matrix
 from services.common.settings import Settings
 from services.common.settings.robot import RobotDriverKind
 from services.common.shell import GrpcShell, cell_token
+from services.kinematics import analytic
 from services.kinematics.robot_models import get_robot
 from services.kinematics.tool import tool_frame
 from services.kinematics.trajectory import JointTrajectory
 from services.robot.client import DobotClient
 from services.robot.driver import RobotDriver
 from services.robot.feedback import ClientState, FeedbackState, LinkState
-from services.robot.guard import force_drop_condition
+from services.robot.guard import force_drop_condition, speed_up_length
 from services.robot.link import ControllerLink
 from services.robot.messages import joint_state_msg, robot_status_msg
 from services.robot.safety import cap_ratio, speed_ratio_field
@@ -133,8 +134,14 @@ class RobotControllerServicer(robot_pb2_grpc.RobotControllerServicer):
         stop_when = None
         if request.HasField("force_guard") and request.force_guard.force_drop_n > 0:
             baseline = await self._settled_wrench()
+            direction = list(request.force_guard.direction)
+            lim = self.driver.limits
+            tool = analytic.fk(lim.spec, traj.positions, lim.T_flange_tool)[:, :3, 3]
             stop_when = force_drop_condition(
-                baseline, request.force_guard.force_drop_n, list(request.force_guard.direction)
+                baseline,
+                request.force_guard.force_drop_n,
+                direction,
+                arm_after_m=speed_up_length(tool, traj.times, direction),
             )
         res = await self.driver.execute_trajectory(
             traj, request.servo_period_s or None, stop_when, continues=request.continues
