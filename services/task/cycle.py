@@ -51,6 +51,7 @@ from services.task.moves import (
     raise_waypoint,
     raised,
     run_end,
+    seen_higher,
     starts_in_motion,
 )
 from services.task.pick_planning import RESUME_TOLERANCE_RAD, PickPlanning, near
@@ -110,6 +111,7 @@ class Orchestrator:
         # the last trajectory sent ends in motion and the next has not been sent: the arm flows on
         # through queued targets, and a failed step must stop it rather than let the stream run dry
         self._flowing = False
+        self._grasp_raise_m = 0.0  # this cycle's next grasps go this much higher than seen
         # the grasp and motion planners, and the arm against the camera's view of the pick zone
         self._planning = PickPlanning(grasp, motion, self.config, view)
 
@@ -170,6 +172,7 @@ class Orchestrator:
         self._stage_t0 = None  # what happened since the last cycle belongs to no state of this one
         robot, self.robot = self.robot, cast(RobotPort, RecordingRobot(self.robot, out))
         attempts = Attempts()
+        self._grasp_raise_m = 0.0
         self._enter(CycleState.INIT)
         try:
             await self._prepare(out)
@@ -255,6 +258,10 @@ class Orchestrator:
                     isinstance(exc, PathDeviationError) and grasp_approach(planned.plan, i)
                 )
                 action = decide(exc, attempts, self.config.limits, holding=holding, another_grasp=again)
+                if action is Action.REGRASP and holding and isinstance(exc, GraspFailureError):
+                    # held when the jaws closed, gone since: they may have stood on a table higher than
+                    # seen, blocked apart beside the object (seed 1122: the same grasp failed 4 times)
+                    self._grasp_raise_m += self.config.contact_raise_m
                 out.error_code = type(exc).__name__
                 log.warning("execution failed in %s: %s → %s", self.state.value, exc, action.value)
                 if action is Action.WAIT_FOR_OPERATOR:
@@ -335,6 +342,9 @@ class Orchestrator:
         self, task: TaskKind, obs: Observation, out: PickOutcome, alternative: int
     ) -> PlannedPick:
         q = await self.robot.joints()
+        if self._grasp_raise_m > 0:
+            log.info("grasping %.0f mm higher than seen after an emptied grasp", self._grasp_raise_m * 1e3)
+            obs = seen_higher(obs, self._grasp_raise_m)
         return await self._planning.plan(task, obs, out, alternative, q)
 
     # ------------------------------------------------------------------ EXECUTE

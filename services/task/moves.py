@@ -13,7 +13,7 @@ from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.kinematics.trajectory import JointTrajectory
 from services.task.plan import state_for
 from services.task.planned import PlannedPick
-from services.task.ports import GraspPlan, Move, PlannedWaypoint, SeenBox, SeenRod
+from services.task.ports import GraspPlan, Move, Observation, PlannedWaypoint, SeenBox, SeenRod
 from services.task.states import CycleState
 
 
@@ -147,6 +147,18 @@ def raise_waypoint(plan: GraspPlan, i: int, dz: float) -> None:
     """Move waypoint ``i``'s target up by ``dz`` (its joints are planned again from the pose)."""
     w = plan.waypoints[i]
     plan.waypoints[i] = replace(w, T_base_tool=raised(w.T_base_tool, dz))
+
+
+def seen_higher(obs: Observation, dz: float) -> Observation:
+    """``obs`` with the objects to pick ``dz`` higher than seen (the grasp plans from where they lie)."""
+    if dz <= 0:
+        return obs
+    up = np.array([0.0, 0.0, dz])
+    return replace(
+        obs,
+        rods=tuple(replace(r, center=r.center + up) for r in obs.rods),
+        cubes=tuple(replace(c, centroid=c.centroid + up) for c in obs.cubes),
+    )
 
 
 def is_last_of(plan: GraspPlan, i: int, state: CycleState) -> bool:

@@ -424,6 +424,20 @@ async def test_an_object_lost_on_the_way_is_found_missing_before_the_touch_down_
     assert s[s.index(CycleState.PLACE) + 1] is CycleState.DETECT  # looked again, then the second grasp
 
 
+async def test_a_grasp_emptied_after_it_held_is_tried_again_higher() -> None:
+    """Seed 1122: on a table 4.5 mm above where it was seen the jaws stood on it beside the rod, the
+    sensor said held, and the rod was not in them after LIFT — four times the same grasp. Each grasp after
+    one emptied so goes ``contact_raise_m`` higher."""
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))), robot=FakeRobot(holding_script=[False, True]))
+    outcome = await cell.run()
+    assert outcome.success and outcome.attempts == 2
+    seen_z = [c.target_z for c in cell.grasp.calls]
+    assert seen_z[1] == pytest.approx(seen_z[0] + cell.orchestrator.config.contact_raise_m)
+    # the next cycle starts from what it sees
+    await cell.run()
+    assert cell.grasp.calls[-1].target_z == pytest.approx(seen_z[0])
+
+
 async def test_a_slip_beyond_the_regrasp_budget_aborts_open_handed() -> None:
     cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))), robot=FakeRobot(holding_script=[False]))
     outcome = await cell.run()
