@@ -73,5 +73,5 @@ def _unit(direction: list[float]) -> np.ndarray:
     d = finite_vector(direction or [0.0, 0.0, -1.0], 3, "force guard direction")
     norm = float(np.linalg.norm(d))
     if norm < 1e-9:
-        raise InvalidInputError(f"force guard needs a direction and a positive force drop, got {direction}")
+        raise InvalidInputError(f"force guard needs a direction, got {direction}")
     return d / norm

@@ -50,16 +50,19 @@ class SafetyLimits:
             )
         return q
 
-    def check_workspace(self, q: np.ndarray, what: str = "joint target") -> None:
+    def tool_positions(self, q: np.ndarray) -> np.ndarray:
+        """The tool tip (base frame, (N, 3) m) at each joint vector of ``q``."""
         qs = np.asarray(q, dtype=float).reshape(-1, self.spec.dof)
-        T = analytic.fk(self.spec, qs, self.T_flange_tool)
-        p = T[:, :3, 3]
+        return analytic.fk(self.spec, qs, self.T_flange_tool)[:, :3, 3]
+
+    def check_workspace(self, q: np.ndarray, what: str = "joint target") -> None:
+        p = self.tool_positions(q)
         lo, hi = np.array(self.workspace.min), np.array(self.workspace.max)
         bad = (p < lo) | (p > hi)
         if bad.any():
             k, axis = (int(x[0]) for x in np.nonzero(bad))
             raise LimitViolationError(
-                f"{what}{f' sample {k}' if qs.shape[0] > 1 else ''}: tool tip at "
+                f"{what}{f' sample {k}' if p.shape[0] > 1 else ''}: tool tip at "
                 f"({p[k, 0]:.3f}, {p[k, 1]:.3f}, {p[k, 2]:.3f}) m leaves the workspace on "
                 f"{'xyz'[axis]} (bounds {lo[axis]:.3f}..{hi[axis]:.3f} m); not sent"
             )

@@ -26,7 +26,6 @@ from services.common.messages import pose_to_matrix
 from services.common.settings import Settings
 from services.common.settings.robot import RobotDriverKind
 from services.common.shell import GrpcShell, cell_token
-from services.kinematics import analytic
 from services.kinematics.robot_models import get_robot
 from services.kinematics.tool import tool_frame
 from services.kinematics.trajectory import JointTrajectory
@@ -135,8 +134,7 @@ class RobotControllerServicer(robot_pb2_grpc.RobotControllerServicer):
         if request.HasField("force_guard") and request.force_guard.force_drop_n > 0:
             baseline = await self._settled_wrench()
             direction = list(request.force_guard.direction)
-            lim = self.driver.limits
-            tool = analytic.fk(lim.spec, traj.positions, lim.T_flange_tool)[:, :3, 3]
+            tool = self.driver.limits.tool_positions(traj.positions)
             stop_when = force_drop_condition(
                 baseline,
                 request.force_guard.force_drop_n,
