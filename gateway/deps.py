@@ -15,7 +15,7 @@ if TYPE_CHECKING:
     from gateway.state import Cell
 
 
-def get_cell(request: Request) -> Cell:
+async def get_cell(request: Request) -> Cell:
     return request.app.state.cell
 
 
@@ -23,14 +23,14 @@ CellDep = Annotated["Cell", Depends(get_cell)]
 
 
 async def get_session(request: Request) -> AsyncIterator[AsyncSession]:
-    async with get_cell(request).sessions() as session:
+    async with request.app.state.cell.sessions() as session:
         yield session
 
 
 SessionDep = Annotated[AsyncSession, Depends(get_session)]
 
 
-def get_picks(session: SessionDep) -> PickRepository:
+async def get_picks(session: SessionDep) -> PickRepository:
     return PickRepository(session)
 
 

