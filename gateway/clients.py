@@ -17,7 +17,7 @@ import grpc.aio
 from pickplace.v1 import common_pb2, robot_pb2, robot_pb2_grpc, task_pb2, task_pb2_grpc
 
 from services.common.errors import RobotCommunicationError
-from services.common.grpc_util import cell_token, channel, translate
+from services.common.grpc_util import bearer_metadata, cell_token, channel, translate
 from services.common.settings import Settings
 from services.common.shell import ServiceShell
 
@@ -78,6 +78,8 @@ class CellClients(ServiceShell):
         self._robot_port = g.robot_port
         self._channels: list[grpc.aio.Channel] = []
         self._token = cell_token(settings)
+        # the e-stop's channel has no interceptor: its calls carry the token themselves
+        self.estop_metadata = bearer_metadata(self._token) if self._token else None
         self.task: task_pb2_grpc.TaskControllerStub | None = None
         self.robot: robot_pb2_grpc.RobotControllerStub | None = None
         self.estop_robot: robot_pb2_grpc.RobotControllerStub | None = None
@@ -87,14 +89,16 @@ class CellClients(ServiceShell):
         # a task-service notification still waiting at shutdown is moot: the shell cancels it first
         stack.push_async_callback(self._close_channels)
 
-        def open_(host: str, port: int) -> grpc.aio.Channel:
-            ch = open_channel(host, port, self._token)
+        def open_(host: str, port: int, token: str | None = self._token) -> grpc.aio.Channel:
+            ch = open_channel(host, port, token)
             self._channels.append(ch)
             return ch
 
         self.task_channel = open_(self._task_host, self._task_port)
         self.robot_channel = open_(self._robot_host, self._robot_port)
-        self.estop_channel = open_(self._robot_host, self._robot_port)
+        # no client interceptor on the e-stop's channel (each adds a task and loop turns before the
+        # request leaves): its calls carry the token as their own metadata (estop_metadata)
+        self.estop_channel = open_(self._robot_host, self._robot_port, None)
         self.task = task_pb2_grpc.TaskControllerStub(self.task_channel)
         self.robot = robot_pb2_grpc.RobotControllerStub(self.robot_channel)
         self.estop_robot = robot_pb2_grpc.RobotControllerStub(self.estop_channel)
@@ -149,7 +153,10 @@ class CellClients(ServiceShell):
             # wait_for_ready: a channel still backing off after a driver restart waits (up to the
             # timeout) for the reconnection instead of failing at once
             call = self.estop_robot.EmergencyStop(
-                robot_pb2.EmergencyStopRequest(), timeout=self.estop_timeout_s, wait_for_ready=True
+                robot_pb2.EmergencyStopRequest(),
+                timeout=self.estop_timeout_s,
+                wait_for_ready=True,
+                metadata=self.estop_metadata,
             )
             self.spawn(self._notify_task_estop(on_task_result), "estop-task-notify")
             return await call

@@ -89,7 +89,12 @@ class RobotControllerRelay(robot_pb2_grpc.RobotControllerServicer):
         estop: bool = False,
     ) -> R:
         try:
-            return await method(request, timeout=self._timeout(context), wait_for_ready=estop)
+            return await method(
+                request,
+                timeout=self._timeout(context),
+                wait_for_ready=estop,
+                metadata=self._cell.clients.estop_metadata if estop else None,
+            )
         except grpc.aio.AioRpcError as exc:
             await _passthrough(context, exc)
 
