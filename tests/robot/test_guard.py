@@ -78,3 +78,16 @@ def test_a_descent_at_constant_speed_is_watched_from_its_first_millimetres():
     z = -np.concatenate([[0.0], np.cumsum(0.025 * ramp[1:] * np.diff(t))])
     tool = np.column_stack([np.zeros_like(t), np.zeros_like(t), z])
     assert speed_up_length(tool, t, DOWN) < 0.001
+
+
+def test_a_descent_slow_from_its_start_is_watched_through_its_gentle_speed_up():
+    """Seed 1007: the touch-down taken 10 mm further, time-scaled to 25 mm/s on average, speeds up at
+    0.25 m/s² over its first 5 mm (too gentle to lighten the wrist by the guard's 0.6 N); unarmed there it
+    pushed the rod 3 mm into the table before the guard fired at 12 N."""
+    t = np.linspace(0.0, 0.4, 41)
+    z = np.where(t <= 0.2, -0.5 * 0.25 * t**2, -0.005 - (0.05 * (t - 0.2) - 0.5 * 0.25 * (t - 0.2) ** 2))
+    tool = np.column_stack([np.zeros_like(t), np.zeros_like(t), z])
+    assert speed_up_length(tool, t, DOWN) == 0.0
+    # the same shape four times as fast (4 m/s²): watched only past its speed-up
+    fast = speed_up_length(tool, t / 4, DOWN)
+    assert 0.0045 < fast < 0.0056
