@@ -428,7 +428,11 @@ class Orchestrator:
                         res.duration_s,
                         " (stopped on touch-down)" if res.stopped_early else "",
                     )
-                    if w.guard_force_n > 0 and not res.stopped_early:
+                    if (
+                        w.guard_force_n > 0
+                        and not res.stopped_early
+                        and not await self._touch_down_further(planned, i)
+                    ):
                         log.warning("%s: no touch-down detected within the overtravel", w.name)
                     if w.guard_force_n > 0:
                         q_known = await self.robot.joints()  # where the arm came to rest after the stop
@@ -452,6 +456,42 @@ class Orchestrator:
             if state is CycleState.LIFT and cfg.verify_grasp and is_last_of(plan, i, CycleState.LIFT):
                 # before the turn is queued, though the arm flows on: never carry on with an empty gripper
                 await self._check_holding("after LIFT")
+
+    async def _touch_down_further(self, planned: PlannedPick, i: int) -> bool:
+        """A guarded touch-down that went its whole overtravel without feeling the contact (a table lower,
+        or the object held higher, than planned) goes on, guarded, ``touch_down_extension_m`` further
+        rather than letting go in the air; True once it touched. A further way it cannot plan (the fingers
+        would meet the table) is not taken."""
+        cfg = self.config
+        w = planned.plan.waypoints[i]
+        if cfg.touch_down_extension_m <= 0:
+            return False
+        q = await self.robot.joints()
+        try:
+            traj = await self._timed(
+                self._planning.further_touch_down(
+                    planned.plan, i, q, planned.obstacles, cfg.touch_down_extension_m
+                ),
+                cfg.deadlines.plan_s,
+                f"planning the touch-down at {w.name} further",
+                PlanningError,
+            )
+        except PlanningError as exc:
+            log.warning("%s: no touch-down within the overtravel, and no further way down: %s", w.name, exc)
+            return False
+        if traj is None:
+            return False
+        log.info(
+            "%s: no touch-down within the overtravel: %.0f mm further",
+            w.name,
+            cfg.touch_down_extension_m * 1e3,
+        )
+        res = await self._arm(
+            self.robot.execute(traj, w.guard_force_n),
+            cfg.deadlines.motion_s,
+            f"touch-down at {w.name}, further",
+        )
+        return res.stopped_early
 
     async def _check_holding(self, when: str) -> None:
         holding = await self._arm(self.robot.holding(), self.config.deadlines.gripper_s, "grasp check")

@@ -27,6 +27,8 @@ class CycleConfig:
     # a grasp approach the controller stopped on a contact (the fingertips on a table seen too low:
     # camera calibration error of +-0.5 deg is +-6 mm at the rod) is retried this much higher, each time
     contact_raise_m: float = 0.003
+    # a guarded touch-down that found no contact within its overtravel goes on this much further, guarded
+    touch_down_extension_m: float = 0.01
     home_joints: tuple[float, ...] | None = None  # rad; each cycle starts here (clear camera view)
     # a cycle that starts away from home first rises straight up to this tool height (m), clear of the
     # boxes on the table (an aborted cycle may have left the jaws beside one)

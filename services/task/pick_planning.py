@@ -198,6 +198,24 @@ class PickPlanning:
                 traj = traj.scaled(needed / traj.duration)
         return traj
 
+    async def further_touch_down(
+        self, plan: GraspPlan, i: int, start: np.ndarray, obstacles: tuple[SeenBox, ...], extension_m: float
+    ) -> JointTrajectory | None:
+        """The guarded touch-down to waypoint ``i`` gone on ``extension_m`` past its overtravel from
+        ``start`` (where it ended without feeling the contact), in its own scene, slow all the way."""
+        move = move_to(plan, i)
+        w = plan.waypoints[i]
+        if move is None or w.guard_force_n <= 0:
+            raise PlanningError(f"{w.name} is not a guarded touch-down")
+        target = move.target.copy()
+        target[:3, 3] += extension_m * np.asarray(w.guard_direction, dtype=float)
+        further = replace(move, target=target, label=f"{w.name}_FURTHER")
+        traj = await self.single(start, further, obstacles)
+        if traj is None:
+            return None
+        # at the touch-down speed from the first millimetre: the contact is due at any moment
+        return await self._paced(replace(w, guard_slow_band_m=0.0), further, traj, start)
+
     async def single(
         self, start: np.ndarray, move: Move, obstacles: tuple[SeenBox, ...]
     ) -> JointTrajectory | None:

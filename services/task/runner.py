@@ -78,6 +78,7 @@ def cycle_config(settings: Settings) -> CycleConfig:
         ),
         detect_retry_delay_s=t.detect_retry_delay_s,
         verify_grasp=t.verify_grasp,
+        touch_down_extension_m=t.touch_down_extension_m,
         jaw_footprint_m=(settings.motion.tool.finger_box_m[0], settings.motion.tool.finger_box_m[1]),
         jaw_clearance_m=settings.motion.padding_m,
         home_joints=tuple(float(np.deg2rad(v)) for v in home_deg) if home_deg is not None else None,

@@ -222,12 +222,13 @@ class FakeRobot:
     ("stop",); ``label`` is the move's label (the fake motion puts it in the trajectory's meta).
     ``faults`` maps a move number (0 = the first move) to the fault raised during it; ``holding_script``
     scripts the object sensor's answers (the last repeats); guarded moves touch down ``touch_at`` of
-    the way."""
+    the way, or each the next of ``touch_script`` (the last repeats; 1.0: no touch-down on the way)."""
 
     q: np.ndarray = field(default_factory=lambda: HOME.copy())
     faults: dict[int, Fault] = field(default_factory=dict)
     holding_script: list[bool] = field(default_factory=lambda: [True])
     touch_at: float = 0.75
+    touch_script: list[float] = field(default_factory=list)
     commands: list[tuple[object, ...]] = field(default_factory=list)
     clock_s: float = 0.0  # the controller's clock: advances by what the arm executes
     moves: int = 0
@@ -235,6 +236,7 @@ class FakeRobot:
     reached: dict[str, np.ndarray] = field(default_factory=dict)  # where each labelled move left the arm
     safety_stopped: bool = False
     _holding_calls: int = 0
+    _guarded_calls: int = 0
 
     async def joints(self) -> np.ndarray:
         return self.q.copy()
@@ -250,7 +252,7 @@ class FakeRobot:
         self.moves += 1
         a, b = traj.positions[0], traj.positions[-1]
         fault = self.faults.get(k)
-        share = fault.at if fault else (self.touch_at if force_guard_n > 0 else 1.0)
+        share = fault.at if fault else (self._touch_share() if force_guard_n > 0 else 1.0)
         self.q = a + share * (b - a)
         self.clock_s += share * traj.duration
         self.commands.append(("move", traj.meta.get("label", ""), force_guard_n > 0))
@@ -261,6 +263,13 @@ class FakeRobot:
             self.safety_stopped = fault.safety
             raise fault.error
         return MoveOutcome(self.q.copy(), share * traj.duration, stopped_early=share < 1.0)
+
+    def _touch_share(self) -> float:
+        if not self.touch_script:
+            return self.touch_at
+        share = self.touch_script[min(self._guarded_calls, len(self.touch_script) - 1)]
+        self._guarded_calls += 1
+        return share
 
     async def gripper(self, close: bool) -> GripOutcome:
         self.commands.append(("gripper", GripperCommand.CLOSE if close else GripperCommand.OPEN))

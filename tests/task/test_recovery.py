@@ -424,6 +424,51 @@ async def test_an_object_lost_on_the_way_is_found_missing_before_the_touch_down_
     assert s[s.index(CycleState.PLACE) + 1] is CycleState.DETECT  # looked again, then the second grasp
 
 
+async def test_a_touch_down_that_felt_no_contact_goes_on_further_before_letting_go() -> None:
+    """Seed 1007: a table 4.8 mm below where it was seen and a rod held 7 mm higher than planned put the
+    contact 12 mm past nominal; the touch-down went its 10 mm overtravel, felt nothing, and the rod was let
+    go 2.2 mm above the table. It now goes on, guarded and slow, ``touch_down_extension_m`` further."""
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))), robot=FakeRobot(touch_script=[1.0, 0.4]))
+    outcome = await cell.run()
+    assert outcome.success and outcome.attempts == 1
+    moves = cell.moves()
+    assert moves[moves.index("PLACE") + 1] == "PLACE_FURTHER"
+    guarded = [c[1] for c in cell.robot.commands if c[0] == "move" and c[2]]
+    assert guarded == ["PLACE", "PLACE_FURTHER"]  # both under the force guard
+    # from where the first one ended, straight on down by the extension past its overtravel target
+    (req,) = [r for r in cell.motion.requests if r.labels == ["PLACE_FURTHER"]]
+    (place,) = [m for r in cell.motion.requests for m in r.moves if m.label == "PLACE"]
+    (further,) = req.moves
+    assert np.allclose(req.start, cell.robot.reached["PLACE"])
+    ext = cell.orchestrator.config.touch_down_extension_m
+    assert further.target[2, 3] == pytest.approx(place.target[2, 3] - ext)
+    assert further.held is HELD_ROD and further.table_contact and further.slow
+    # let go only once it touched: the jaws open after the further touch-down
+    i_further = cell.robot.commands.index(("move", "PLACE_FURTHER", True))
+    assert ("gripper", OPEN) in cell.robot.commands[i_further + 1 :]
+
+
+async def test_a_touch_down_is_not_taken_further_when_none_is_configured_or_none_can_be_planned() -> None:
+    cfg = replace(FakeCell(FakeVision()).config, touch_down_extension_m=0.0)
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))), robot=FakeRobot(touch_script=[1.0]), config=cfg)
+    assert (await cell.run()).success
+    assert "PLACE_FURTHER" not in cell.moves()
+
+    # the further way down refused (the fingers would meet the table): let go where it ended
+    class RefusesFurther(FakeMotion):
+        async def plan_moves(self, start, moves, obstacles):  # type: ignore[no-untyped-def]
+            if [m.label for m in moves] == ["PLACE_FURTHER"]:
+                raise CollisionError("the fingers would touch the table")
+            return await super().plan_moves(start, moves, obstacles)
+
+    cell = FakeCell(
+        FakeVision(seen(rod_at(0.5, 0.1))), motion=RefusesFurther(), robot=FakeRobot(touch_script=[1.0])
+    )
+    outcome = await cell.run()
+    assert outcome.success and "PLACE_FURTHER" not in cell.moves()
+    assert cell.moves().index("PLACE") < cell.moves().index("RETRACT")
+
+
 async def test_a_grasp_emptied_after_it_held_is_tried_again_higher() -> None:
     """Seed 1122: on a table 4.5 mm above where it was seen the jaws stood on it beside the rod, the
     sensor said held, and the rod was not in them after LIFT — four times the same grasp. Each grasp after

@@ -35,6 +35,12 @@ class TaskSettings(Model):
     holding_speed_scale: float = Field(1.0, gt=0, le=1)
     # a guarded line's planned speed; the task paces it (grasp: slow only through the last band)
     guarded_speed_scale: float = Field(0.5, gt=0, le=1)
+    # A guarded touch-down that went its whole overtravel without feeling the contact goes on, guarded and
+    # at the touch-down speed, this much further before letting go (0: let go where it ended). Seed 1007:
+    # a table 4.8 mm below where it was seen and a rod held 7 mm off where the grasp was planned put the
+    # contact 12 mm past nominal; the 10 mm overtravel ended 2.2 mm above the table and the rod was let go
+    # in the air.
+    touch_down_extension_m: float = Field(0.01, ge=0, le=0.05)
     # After a cycle the arm stays where its retract leaves the camera's view of the pick zone clear (or
     # goes only as far toward the safe home as that takes), decided by projecting its collision model
     # into the camera (sim.twin.camera) against the pick zone (sim.twin.scene) raised to this height.
