@@ -51,6 +51,7 @@ log = logging.getLogger("pickplace.robot.driver")
 T = TypeVar("T")
 
 START_TOLERANCE_RAD = np.deg2rad(1.0)  # a trajectory must start this close to the measured joints
+AT_REST_RAD_S = 0.01  # every joint slower than this: the arm is at rest
 # targets queued beyond the lookahead at the end of a trajectory that continues: the controller keeps
 # moving while the next trajectory's request travels (a starved ServoJ queue stops the arm dead)
 CONTINUE_EXTRA_TARGETS = 8
@@ -317,7 +318,11 @@ class RobotDriver(Supervision):
             await self._end_gap_watch()  # a continuation's successor: the gap's watch ends here
             # every check runs under the lock, on the state the stream will start from: a request that
             # came in while another motion ran is judged against where that motion left the arm
-            targets, q_before, following = self._checked_targets(traj, period)
+            try:
+                targets, q_before, following = self._checked_targets(traj, period)
+            except ContinuationLateError:
+                await self._come_to_rest()  # the caller plans again from where the arm then stands
+                raise
             self._abort.clear()
             self._abort_by_estop = False
             r = self.settings.robot
@@ -352,6 +357,14 @@ class RobotDriver(Supervision):
             self._gap_task = asyncio.create_task(self._watch_gap(), name="robot-continuation-watch")
             return res
 
+    async def _come_to_rest(self) -> None:
+        """Until the feedback shows the arm at rest (on the controller's clock, at most the goal settle
+        time): a motion that ran out leaves the arm tracking on behind its last target for a moment."""
+        with contextlib.suppress(TimeoutError):
+            await self.client.wait_controller(
+                lambda f: float(np.max(np.abs(f.qd))) < AT_REST_RAD_S, self.settings.robot.goal_settle_s
+            )
+
     def _refuse_if_busy(self, what: str) -> None:
         if self._motion_lock.locked():
             raise RobotBusyError(
@@ -373,7 +386,8 @@ class RobotDriver(Supervision):
             raise EmergencyStopError("emergency stop is active")
         if fb.in_error:
             raise ControllerError("controller is in alarm; clear it before executing a trajectory")
-        following = self._continue_from is not None and self._still_queued(fb)
+        continuing = self._continue_from is not None  # the last trajectory flowed on into this one
+        following = continuing and self._still_queued(fb)
         # following: the previous trajectory's targets are still queued or running; start from its last
         if following and self._continue_from is not None and self._continue_tail is not None:
             q_now, q_before = self._continue_from, self._continue_tail
@@ -383,6 +397,14 @@ class RobotDriver(Supervision):
         self._continue_from = self._continue_tail = None
         start_err = float(np.max(np.abs(traj.positions[0] - q_now)))
         if not np.isfinite(start_err) or start_err > START_TOLERANCE_RAD:
+            if continuing and not following and np.isfinite(start_err) and _starts_moving(traj):
+                # the motion it continues ran out before it came (a busy machine): the arm comes to rest
+                # at that motion's end, lagging behind it as it tracks (seed 1074: 1.59° under load)
+                raise ContinuationLateError(
+                    f"trajectory starts {np.rad2deg(start_err):.2f}° away from the measured joints: the "
+                    "motion it continues has already run out and the arm comes to rest behind it; plan "
+                    "it again from rest"
+                )
             raise StartMismatchError(
                 f"trajectory starts {np.rad2deg(start_err):.2f}° away from the "
                 f"{'last queued target' if following else 'measured joints'} "
@@ -396,7 +418,7 @@ class RobotDriver(Supervision):
         except LimitViolationError as exc:
             if following:
                 raise
-            if bool(np.any(np.abs(traj.velocities[0]) > 1e-9)):
+            if _starts_moving(traj):
                 raise ContinuationLateError(
                     f"{exc}: it continues a motion that has already ended (the arm is at rest); "
                     "plan it again from rest"
@@ -628,3 +650,8 @@ class RobotDriver(Supervision):
     # ------------------------------------------------------------------ gripper
     async def set_gripper(self, close: bool) -> GripperState:
         return await (self.gripper.close() if close else self.gripper.open())
+
+
+def _starts_moving(traj: JointTrajectory) -> bool:
+    """Whether ``traj`` starts in motion (it continues another one)."""
+    return bool(np.any(np.abs(traj.velocities[0]) > 1e-9))

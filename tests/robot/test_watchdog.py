@@ -16,7 +16,7 @@ import pytest
 from pickplace.v1 import robot_pb2, robot_pb2_grpc
 
 from services.common import grpc_util
-from services.common.errors import ContinuationLateError, ExecutionError
+from services.common.errors import ContinuationLateError, ExecutionError, StartMismatchError
 from services.common.settings import Settings
 from services.dobot import RobotMode
 from services.kinematics.interpolation import quintic_move
@@ -25,6 +25,7 @@ from services.robot.client import DobotClient
 from services.robot.driver import RobotDriver
 from services.robot.service import RobotService, build_driver
 from services.sim.app import build_sim_server, servo_watchdog_margin
+from services.sim.controller import FaultKind, TrackingFault
 from tests.conftest import HOME
 
 pytestmark = pytest.mark.integration
@@ -151,6 +152,58 @@ async def test_a_continuation_that_never_comes_stops_the_arm_and_the_next_is_jud
     # as a late continuation the task plans again from rest
     with pytest.raises(ContinuationLateError, match=r"accelerate.*plan it again from rest"):
         await driver.execute_trajectory(second, PERIOD)
+
+
+async def test_a_continuation_off_an_arm_still_settling_after_its_motion_ran_out_is_late_not_a_mismatch(
+    settings, holding_sim
+):
+    """Seed 1074 under load: the motion a trajectory continued had run out before it came, and the arm,
+    tracking on behind its last target, stood 1.59° off its start: refused as a start mismatch, which the
+    cycle cannot mend while it takes the arm to be moving, so it gave up. It is a late continuation (plan it
+    again from rest); a trajectory planned from rest that starts off the arm is still a mismatch."""
+    # a gap watch that cannot trip meanwhile: the motion runs out and nothing stops it
+    s = _pointing_at(settings, holding_sim)
+    s = s.model_copy(update={"robot": s.robot.model_copy(update={"servo_watchdog_margin_s": 10.0})})
+    d = build_driver(s)
+    await d.start()
+    try:
+        await d.enable()
+        traj = _long_move(d, 20.0)
+        half = round(traj.duration / 2 / PERIOD) * PERIOD
+        ts = np.arange(0.0, half + 1e-9, PERIOD)
+        first = JointTrajectory(traj.joint_names, ts, *traj.sample(ts))
+        rest_ts = np.arange(half, traj.duration + 1e-9, PERIOD)
+        second = JointTrajectory(traj.joint_names, rest_ts - half, *traj.sample(rest_ts))
+        # the arm settles 1.5° behind its reference (the lag of a real drive at speed, held still here)
+        with holding_sim.lock:
+            holding_sim.controller.tracking_fault = TrackingFault(
+                FaultKind.OFFSET, 0, offset_rad=np.deg2rad(-1.5)
+            )
+        await d.execute_trajectory(first, PERIOD, continues=True)
+        # the motion runs out: the controller has executed its last target and idles, the arm behind it
+        await d.client.wait_feedback(
+            lambda f: (
+                f.robot_mode == RobotMode.ENABLE and abs(f.q[0] - first.positions[-1][0]) > np.deg2rad(1.2)
+            ),
+            5.0,
+        )
+        assert d.watchdog_trips == 0
+        n_servo = sum(1 for _, t in _servo_log(holding_sim) if t.startswith("ServoJ"))
+        with pytest.raises(ContinuationLateError, match=r"run out.*plan it again from rest"):
+            await d.execute_trajectory(second, PERIOD)
+        # nothing was sent, and the arm is at rest where the first motion left it
+        assert sum(1 for _, t in _servo_log(holding_sim) if t.startswith("ServoJ")) == n_servo
+        assert float(np.max(np.abs(d.feedback.qd))) < 0.01
+        # planned from rest (it does not start moving), the same offset is a start mismatch
+        at_rest = JointTrajectory(traj.joint_names, second.times, second.positions, 0 * second.velocities,
+                                  0 * second.accelerations)  # fmt: skip
+        with pytest.raises(StartMismatchError, match="measured joints"):
+            await d.execute_trajectory(at_rest, PERIOD)
+    finally:
+        with holding_sim.lock:
+            holding_sim.controller.tracking_fault = None
+        await d.close()
+        await d.client.close()
 
 
 async def test_a_grpc_client_that_dies_mid_motion_leaves_the_arm_stopped(settings, holding_sim):
