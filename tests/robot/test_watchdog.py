@@ -72,6 +72,17 @@ def _long_move(d: RobotDriver, deg: float = 60.0) -> JointTrajectory:
     return quintic_move(d.joint_positions(), goal, joint_names=d.spec.joint_names, limits=lim)
 
 
+def _halves(traj: JointTrajectory) -> tuple[JointTrajectory, JointTrajectory]:
+    """``traj`` cut at its middle knot: the first half ends in motion, the second continues it."""
+    half = round(traj.duration / 2 / PERIOD) * PERIOD
+    ts = np.arange(0.0, half + 1e-9, PERIOD)
+    rest_ts = np.arange(half, traj.duration + 1e-9, PERIOD)
+    return (
+        JointTrajectory(traj.joint_names, ts, *traj.sample(ts)),
+        JointTrajectory(traj.joint_names, rest_ts - half, *traj.sample(rest_ts)),
+    )
+
+
 def _servo_log(sim: Any) -> list[tuple[int, str]]:
     with sim.lock:
         return list(sim.controller.command_log)
@@ -133,12 +144,7 @@ async def test_a_driver_stalled_mid_stream_stops_the_arm_once_the_controller_run
 async def test_a_continuation_that_never_comes_stops_the_arm_and_the_next_is_judged_from_rest(
     driver, holding_sim
 ):
-    traj = _long_move(driver, 40.0)
-    half = round(traj.duration / 2 / PERIOD) * PERIOD
-    ts = np.arange(0.0, half + 1e-9, PERIOD)
-    first = JointTrajectory(traj.joint_names, ts, *traj.sample(ts))
-    rest_ts = np.arange(half, traj.duration + 1e-9, PERIOD)
-    second = JointTrajectory(traj.joint_names, rest_ts - half, *traj.sample(rest_ts))
+    first, second = _halves(_long_move(driver, 40.0))
     await driver.execute_trajectory(first, PERIOD, continues=True)
     n_servo = sum(1 for _, t in _servo_log(holding_sim) if t.startswith("ServoJ"))
     # the task "dies": nothing follows. The driver's watch of the gap stops the arm by itself.
@@ -168,12 +174,7 @@ async def test_a_continuation_off_an_arm_still_settling_after_its_motion_ran_out
     await d.start()
     try:
         await d.enable()
-        traj = _long_move(d, 20.0)
-        half = round(traj.duration / 2 / PERIOD) * PERIOD
-        ts = np.arange(0.0, half + 1e-9, PERIOD)
-        first = JointTrajectory(traj.joint_names, ts, *traj.sample(ts))
-        rest_ts = np.arange(half, traj.duration + 1e-9, PERIOD)
-        second = JointTrajectory(traj.joint_names, rest_ts - half, *traj.sample(rest_ts))
+        first, second = _halves(_long_move(d, 20.0))
         # the arm settles 1.5° behind its reference (the lag of a real drive at speed, held still here)
         with holding_sim.lock:
             holding_sim.controller.tracking_fault = TrackingFault(
@@ -195,7 +196,7 @@ async def test_a_continuation_off_an_arm_still_settling_after_its_motion_ran_out
         assert sum(1 for _, t in _servo_log(holding_sim) if t.startswith("ServoJ")) == n_servo
         assert float(np.max(np.abs(d.feedback.qd))) < 0.01
         # planned from rest (it does not start moving), the same offset is a start mismatch
-        at_rest = JointTrajectory(traj.joint_names, second.times, second.positions, 0 * second.velocities,
+        at_rest = JointTrajectory(second.joint_names, second.times, second.positions, 0 * second.velocities,
                                   0 * second.accelerations)  # fmt: skip
         with pytest.raises(StartMismatchError, match="measured joints"):
             await d.execute_trajectory(at_rest, PERIOD)
