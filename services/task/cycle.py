@@ -464,7 +464,7 @@ class Orchestrator:
         would meet the table) is not taken."""
         cfg = self.config
         w = planned.plan.waypoints[i]
-        if cfg.touch_down_extension_m <= 0:
+        if cfg.touch_down_extension_m <= 0 or not w.holding:  # only what sets down a carried object
             return False
         q = await self.robot.joints()
         try:
