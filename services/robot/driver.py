@@ -51,7 +51,6 @@ log = logging.getLogger("pickplace.robot.driver")
 T = TypeVar("T")
 
 START_TOLERANCE_RAD = np.deg2rad(1.0)  # a trajectory must start this close to the measured joints
-AT_REST_RAD_S = 0.01  # every joint slower than this: the arm is at rest
 # targets queued beyond the lookahead at the end of a trajectory that continues: the controller keeps
 # moving while the next trajectory's request travels (a starved ServoJ queue stops the arm dead)
 CONTINUE_EXTRA_TARGETS = 8
@@ -361,9 +360,7 @@ class RobotDriver(Supervision):
         """Until the feedback shows the arm at rest (on the controller's clock, at most the goal settle
         time): a motion that ran out leaves the arm tracking on behind its last target for a moment."""
         with contextlib.suppress(TimeoutError):
-            await self.client.wait_controller(
-                lambda f: float(np.max(np.abs(f.qd))) < AT_REST_RAD_S, self.settings.robot.goal_settle_s
-            )
+            await self.client.wait_controller(lambda f: f.at_rest, self.settings.robot.goal_settle_s)
 
     def _refuse_if_busy(self, what: str) -> None:
         if self._motion_lock.locked():

@@ -39,6 +39,11 @@ class LinkEvent:
     reason: str
 
 
+# no joint turning faster than this: the arm is at rest (a stopped or starved arm still brakes, and a
+# physical one settles behind its reference, for a moment)
+REST_SPEED_RAD_S = 0.01
+
+
 class ClientState(enum.Enum):
     IDLE = "idle"
     CONNECTING = "connecting"
@@ -95,6 +100,10 @@ class FeedbackState:
             timestamp_ms=int(rec["TimeStamp"]),
             received_ns=received_ns,
         )
+
+    @property
+    def at_rest(self) -> bool:
+        return float(np.max(np.abs(self.qd))) < REST_SPEED_RAD_S
 
     @property
     def in_error(self) -> bool:

@@ -17,8 +17,9 @@ from services.task.ports import GraspPlan, Move, Observation, PlannedWaypoint, S
 from services.task.states import CycleState
 
 
-def move_to(plan: GraspPlan, i: int) -> Move | None:
-    """The move to waypoint ``i`` of a grasp plan, in its scene; None for a waypoint without motion."""
+def move_to(plan: GraspPlan, i: int, further_m: float = 0.0) -> Move | None:
+    """The move to waypoint ``i`` of a grasp plan, in its scene; None for a waypoint without motion.
+    ``further_m``: a guarded approach taken that much past its overtravel."""
     w = plan.waypoints[i]
     held = plan.held_object if w.holding else None
     if w.motion is MotionKind.HOLD:
@@ -30,7 +31,7 @@ def move_to(plan: GraspPlan, i: int) -> Move | None:
     guarded = w.guard_force_n > 0
     T = w.T_base_tool.copy()
     if guarded:  # a guarded approach may go as far as the overtravel; touch-down stops it earlier
-        T[:3, 3] += w.guard_overtravel_m * w.guard_direction
+        T[:3, 3] += (w.guard_overtravel_m + further_m) * w.guard_direction
     lifting_off = w.holding and i > 0 and not plan.waypoints[i - 1].holding
     return Move(MotionKind.LINEAR, T, held, slow=guarded, table_contact=lifting_off or guarded, label=w.name)
 

@@ -203,13 +203,11 @@ class PickPlanning:
     ) -> JointTrajectory | None:
         """The guarded touch-down to waypoint ``i`` gone on ``extension_m`` past its overtravel from
         ``start`` (where it ended without feeling the contact), in its own scene, slow all the way."""
-        move = move_to(plan, i)
+        move = move_to(plan, i, further_m=extension_m)
         w = plan.waypoints[i]
         if move is None or w.guard_force_n <= 0:
             raise PlanningError(f"{w.name} is not a guarded touch-down")
-        target = move.target.copy()
-        target[:3, 3] += extension_m * np.asarray(w.guard_direction, dtype=float)
-        further = replace(move, target=target, label=f"{w.name}_FURTHER")
+        further = replace(move, label=f"{w.name}_FURTHER")
         traj = await self.single(start, further, obstacles)
         if traj is None:
             return None

@@ -46,7 +46,7 @@ from services.common.errors import (
 from services.common.settings.robot import ReconnectSettings
 from services.dobot import RobotMode
 from services.kinematics.robot_models import RobotSpec
-from services.robot.feedback import ClientState, FeedbackState, LinkState
+from services.robot.feedback import REST_SPEED_RAD_S, ClientState, FeedbackState, LinkState
 from services.robot.ur import rtde_api
 from services.robot.ur.feedback import URSample, describe, to_feedback
 from services.robot.ur.io_client import RTDEOutputs
@@ -68,8 +68,7 @@ TOOL_SPEED_MAX_M_S = 1.0  # what a 100 % MovL ratio asks of the tool
 TOOL_ACC_MAX_M_S2 = 2.5
 ENABLE_TIMEOUT_S = 30.0  # controller time for power on + brake release (a real arm takes ~15 s)
 # After a stop the arm still brakes (and a physical one settles behind its reference): it counts as
-# moving, as a Dobot reports RUNNING, until no joint turns faster than this, or for at most so long
-REST_SPEED_RAD_S = 0.01
+# moving, as a Dobot reports RUNNING, until no joint turns faster than REST_SPEED_RAD_S, or for at most so long
 # "Cannot unlock protective stop until 5s after occurrence. …": the controller's own unlock delay
 UNLOCK_TOO_EARLY = re.compile(r"^Cannot unlock protective stop until (\d+(?:\.\d+)?)s after occurrence")
 STOP_SETTLE_MAX_S = 1.0
