@@ -11,7 +11,7 @@ once — grasp options are compared by running them side by side.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -22,6 +22,7 @@ from services.kinematics.robot_models import RobotSpec
 Array = np.ndarray
 
 BIG = 1e9
+MAX_ALTERNATIVE_TRACKS = 2  # other branches kept per path (each costs a collision check when used)
 
 
 @dataclass(frozen=True)
@@ -41,6 +42,9 @@ class TrackResult:
     cost: Array  # (B,) sum of per-step max joint change, plus the move from the seed
     reason: list[str]  # per path: "" when ok, else why not
     fail_index: Array  # (B,) sample index where the last track died (-1 when ok)
+    # per path, the joints of its other usable tracks (other IK branches), cheapest first: a best
+    # track that collides need not end the path (up to MAX_ALTERNATIVE_TRACKS of them)
+    others: list[list[tuple[float, Array]]] = field(default_factory=list)  # (cost, joints)
 
 
 def check_reach(spec: RobotSpec, p: Array, what: str) -> None:
@@ -158,6 +162,7 @@ def track_paths(
     ok = np.zeros(B, dtype=bool)
     q_best = np.zeros((B, N, spec.dof))
     best_cost = np.full(B, BIG)
+    others: list[list[tuple[float, Array]]] = [[] for _ in range(B)]
     for b in np.unique(bi).tolist():
         mine = np.nonzero(bi == b)[0]
         usable = mine[good[mine]]
@@ -171,8 +176,10 @@ def track_paths(
             else:
                 reason[b] = "every IK branch passes near a wrist or elbow singularity"
             continue
-        j = usable[np.argmin(cost[usable])]  # the first of equal costs in track order, as argmin
+        order = usable[np.argsort(cost[usable], kind="stable")]  # equal costs: in track order
+        j = order[0]
         ok[b], q_best[b], best_cost[b] = True, path[ix[j]], cost[j]
+        others[b] = [(float(cost[k]), path[ix[k]]) for k in order[1 : 1 + MAX_ALTERNATIVE_TRACKS]]
         reason[b] = ""
         fail_at[b] = -1
-    return TrackResult(ok, q_best, best_cost, reason, fail_at)
+    return TrackResult(ok, q_best, best_cost, reason, fail_at, others)

@@ -159,6 +159,7 @@ def plan_pick_and_stand(
     T_tool_flange = invert_transform(T_flange_tool)
     tried: list[_Option] = []
     skipped = 0
+    colliding: list[tuple[_Option, list[tuple[float, Array]], int]] = []  # other branches, site's feasible
     for turn_xy in _turn_sites(grasp_pt, p_xy, cfg):
         options = _build_options(a_h, center, grasp_pt, p_xy, lift, rod, cfg, turn_xy)
         tried += options
@@ -176,17 +177,30 @@ def plan_pick_and_stand(
         ranked.sort()
         for cost, b in ranked:
             o = feasible[b]
-            q_path = res.q[b]
             if collision_check is not None:
-                hit = _first_collision(o, q_path, collision_check)
+                hit = _first_collision(o, res.q[b], collision_check)
                 if hit:
                     o.reason, o.kind = hit, "collision"
+                    colliding.append((o, res.others[b], len(ranked)))
                     continue
             if skipped < alternative:
                 skipped += 1
                 continue
             return _assemble(
-                spec, o, q_path, home, cost, lift, rod, cfg, T_flange_tool, stroke_m, p_xy, len(ranked)
+                spec, o, res.q[b], home, cost, lift, rod, cfg, T_flange_tool, stroke_m, p_xy, len(ranked)
+            )
+    # every option's cheapest IK branch collided or was passed over: their other branches, in the
+    # same order (the cheapest may take the elbow down to the table where another clears it; seed
+    # 1912 saw an axis 0.4° off the one that planned leave all 144 options colliding)
+    for o, others, n_ranked in colliding:
+        for cost, q_path in others:
+            if collision_check is not None and _first_collision(o, q_path, collision_check):
+                continue
+            if skipped < alternative:
+                skipped += 1
+                break
+            return _assemble(
+                spec, o, q_path, home, cost, lift, rod, cfg, T_flange_tool, stroke_m, p_xy, n_ranked
             )
     if skipped:
         raise PlanningError(

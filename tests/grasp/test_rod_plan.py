@@ -315,5 +315,39 @@ def test_a_far_rod_along_y_is_turned_upright_nearer_the_base(monkeypatch: pytest
 
     only_over_the_grasp = rod_planner._turn_sites
     monkeypatch.setattr(rod_planner, "_turn_sites", lambda g, xy, cfg: only_over_the_grasp(g, xy, cfg)[:1])
+    monkeypatch.setattr(
+        "services.grasp.reach.MAX_ALTERNATIVE_TRACKS", 0
+    )  # over the grasp, a costlier branch could
     with pytest.raises(CollisionError, match="no feasible pick-and-stand"):
         plan(FAR_ROD, collision_check=check, place_xy=FAR_ROD_PLACE)
+
+
+# seed 1912 as vision saw it after seed 1911 (a wall and four cubes around the rod): the cheapest IK
+# branch of every wrist option collides (the elbow on the table, a cube at the fingers), an axis 0.4°
+# different planned; another branch of one option is free
+SEED_1912_ROD = RodObservation.create(
+    [0.50473, -0.12295, 0.01726], [0.57411, 0.81877, 0.00177], 0.2006, 0.0227
+)
+SEED_1912_BOXES = [
+    Box((0.2826, 0.3039, -0.0014), (0.512, 0.3831, 0.1519), "wall"),
+    Box((0.3593, -0.1528, 0.0), (0.4093, -0.1028, 0.0568), "cube0"),
+    Box((0.4105, 0.0857, 0.0), (0.4605, 0.1357, 0.0578), "cube1"),
+    Box((0.4315, -0.057, 0.0), (0.4815, -0.007, 0.057), "cube2"),
+    Box((0.5292, -0.2356, 0.0), (0.5792, -0.1856, 0.0556), "cube3"),
+]
+
+
+def test_another_ik_branch_is_taken_when_every_cheapest_one_collides(monkeypatch: pytest.MonkeyPatch) -> None:
+    check = MotionCollisionCheck.from_settings(SETTINGS, SEED_1912_BOXES)
+    place = [0.37609, 0.03061]
+    monkeypatch.setattr("services.grasp.reach.MAX_ALTERNATIVE_TRACKS", 0)
+    with pytest.raises(CollisionError, match="with table"):
+        plan(SEED_1912_ROD, collision_check=check, place_xy=place)
+    monkeypatch.undo()
+    p = plan(SEED_1912_ROD, collision_check=check, place_xy=place)
+    for w in p.waypoints:
+        held = p.held if w.holding else None
+        assert not check(w.q, held), f"{w.name}: {check.explain(w.q, held)}"
+        assert np.allclose(fk(SPEC, w.q) @ T_FLANGE_TOOL, w.T_base_tool, atol=1e-6), w.name
+    steps = np.abs(np.diff([w.q for w in p.waypoints if w.name in NAMES[2:8]], axis=0))
+    assert p.notes["joint_motion_rad"] >= float(steps.max(axis=1).sum()) - 1e-9  # its cost is its own
