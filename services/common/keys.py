@@ -59,6 +59,12 @@ class CellKeys:
         return f"{self.prefix}/{CAMERA_FRAMES}"
 
     @property
+    def camera_frame_requests(self) -> str:
+        """An empty sample: a frame is wanted now (a detection the task waits for). A simulated camera
+        renders at once instead of at its next period; a real one streams at its own rate and ignores it."""
+        return f"{self.prefix}/camera/request"
+
+    @property
     def detected_objects(self) -> str:
         return f"{self.prefix}/vision/objects"
 

@@ -146,20 +146,38 @@ def msg_to_frame(msg: vision_pb2.RGBDFrame) -> RGBDFrame:
 
 
 async def publish_camera_frames(
-    camera: Camera, bus: Bus, key: str, rate_hz: float, stop: asyncio.Event
+    camera: Camera,
+    bus: Bus,
+    key: str,
+    rate_hz: float,
+    stop: asyncio.Event,
+    wanted: asyncio.Event | None = None,
 ) -> int:
-    """Stream a camera's frames onto Zenoh (for ``vision.camera.source: bus`` consumers); returns the count."""
+    """Stream a camera's frames onto Zenoh (for ``vision.camera.source: bus`` consumers); returns the
+    count. ``wanted`` set: the next frame is taken at once instead of at the end of the period."""
     period = 1.0 / rate_hz
     n = 0
     while not stop.is_set():
         t0 = time.monotonic()
+        if wanted is not None:
+            wanted.clear()  # a request from here on asks for a frame after this one
         frame = await asyncio.to_thread(camera.capture)
         bus.publish(key, frame_to_msg(frame))
         n += 1
         with contextlib.suppress(TimeoutError):
             async with asyncio.timeout(max(0.0, period - (time.monotonic() - t0))):
-                await stop.wait()
+                await _first_of(stop, wanted)
     return n
+
+
+async def _first_of(*events: asyncio.Event | None) -> None:
+    """Until any of ``events`` is set."""
+    waits = [asyncio.ensure_future(e.wait()) for e in events if e is not None]
+    try:
+        await asyncio.wait(waits, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        for w in waits:
+            w.cancel()
 
 
 def write_intrinsics(directory: Path, intr: CameraIntrinsics, depth_scale: float) -> Path:

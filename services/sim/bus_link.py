@@ -122,10 +122,21 @@ class SimBusLink(ServiceShell):
             cam = await asyncio.to_thread(TwinCamera, engine, self.seed)
             self.camera = CurrentCamera(cam)
             stack.push_async_callback(asyncio.to_thread, self.camera.close)
-            # runs until the shell cancels it (the event is for callers that stop it themselves)
+            # a detection the task waits for asks for its frame: rendered at once, not at the next
+            # period (the twin renders at vision.rate_hz to spare the CPU; a real camera streams at
+            # 15-30 fps, so without this a twin's DETECT waited up to a period a real cell does not)
+            wanted = asyncio.Event()
+            loop = self._loop
+
+            def on_request(_key: str, _payload: bytes) -> None:  # a Zenoh thread
+                loop.call_soon_threadsafe(wanted.set)
+
+            requests = self.bus.subscribe_callback(keys.camera_frame_requests, on_request)
+            stack.callback(self._undeclare, requests)
+            # runs until the shell cancels it (the stop event is for callers that stop it themselves)
             self.spawn(
                 publish_camera_frames(
-                    self.camera, self.bus, keys.camera_frames, self.frame_rate, asyncio.Event()
+                    self.camera, self.bus, keys.camera_frames, self.frame_rate, asyncio.Event(), wanted
                 ),
                 "frames",
             )

@@ -217,7 +217,7 @@ class TaskRunner:
         return self._loop_task is not None and not self._loop_task.done()
 
     def status(self) -> task_pb2.TaskStatus:
-        from services.task.states import PROGRESS
+        from services.task.states import ACTIVE_STATES, PROGRESS
 
         self._seq += 1
         return task_pb2.TaskStatus(
@@ -232,6 +232,7 @@ class TaskRunner:
             running=self.running,
             cycle_index=self.cycle_index,
             last_error=self.last_error,
+            cycle_active=self.running or self.state in ACTIVE_STATES,
         )
 
     def publish_status(self) -> None:

@@ -45,6 +45,10 @@ PROGRESS = {
 }
 
 
+# The states of a cycle under way (DONE: the arm only goes home; a cell idles there after its last).
+ACTIVE_STATES = frozenset(PROGRESS) - {CycleState.DONE}
+
+
 @dataclass(frozen=True)
 class StateDeadlines:
     """Budget of each state (s); exceeding it fails the state with a timeout. Detection and planning

@@ -25,7 +25,7 @@ from typing import Any
 
 import grpc
 import numpy as np
-from pickplace.v1 import common_pb2, vision_pb2, vision_pb2_grpc
+from pickplace.v1 import common_pb2, task_pb2, vision_pb2, vision_pb2_grpc
 
 from services.common.bus import Bus
 from services.common.camera_pose import load_T_base_camera
@@ -46,6 +46,7 @@ from services.common.sensors import (
 )
 from services.common.settings import CameraSourceSettings, Settings
 from services.common.shell import GrpcShell, cell_token
+from services.vision.cycle_watch import CycleWatch
 from services.vision.messages import detections_msg
 from services.vision.overlay import overlay_jpeg
 from services.vision.pipeline import VisionPipeline, replace_timings
@@ -84,7 +85,7 @@ class VisionServicer(vision_pb2_grpc.VisionServicer):
         self, request: vision_pb2.DetectRequest, context: grpc.aio.ServicerContext
     ) -> vision_pb2.DetectResponse:
         frame = msg_to_frame(request.frame) if request.HasField("frame") else None
-        result, used = await self.service.detect_once(frame)
+        result, used = await self.service.detect_once(frame, prompt=True)
         response = vision_pb2.DetectResponse(objects=detections_msg(result, used.frame_id))
         if request.include_debug_image:
             response.debug_jpeg = self.service.latest_jpeg or b""
@@ -135,12 +136,14 @@ class VisionService(GrpcShell):
         self.latest_header = common_pb2.Header()
         self.latest_result: DetectionResult | None = None
         self.published = 0
+        self.paused_periods = 0  # live-loop periods given to a running cycle
         self._bus_frame: RGBDFrame | None = None
         self._bus_frame_event = asyncio.Event()
         self._subscription: Any = None
         self._capture_failures = 0  # in a row: the frame source is taken as down from CAPTURE_FAILURES_DOWN
         self.live: LiveConfig | None = None
         self._detect_lock = asyncio.Lock()
+        self.cycle = CycleWatch()  # the live loop pauses while the task runs a cycle
 
     # --- lifecycle ---------------------------------------------------------------------------------
     async def _start(self, stack: contextlib.AsyncExitStack) -> None:
@@ -156,6 +159,8 @@ class VisionService(GrpcShell):
 
             self._subscription = self.bus.subscribe_callback(self.keys.camera_frames, on_frame)
             stack.callback(self._undeclare_subscription)
+        if self.bus is not None:
+            self._follow_task(self.bus, stack)
         await self._serve_grpc(
             stack,
             lambda server: vision_pb2_grpc.add_VisionServicer_to_server(VisionServicer(self), server),
@@ -181,6 +186,26 @@ class VisionService(GrpcShell):
         if any(c.startswith("vision.") for c in changed):
             self.pipeline.settings = new.vision
 
+    def _follow_task(self, bus: Bus, stack: contextlib.AsyncExitStack) -> None:
+        """Whether the task runs a cycle, from its status on the bus (the live loop gives way to it)."""
+        loop = asyncio.get_running_loop()
+
+        def on_status(_key: str, payload: bytes) -> None:  # a Zenoh thread
+            try:
+                active = task_pb2.TaskStatus.FromString(payload).cycle_active
+            except Exception as exc:  # a bad status must not stop the service
+                log.debug("ignoring an undecodable task status: %s", exc)
+                return
+            loop.call_soon_threadsafe(self.cycle.on_status, active, time.monotonic())
+
+        sub = bus.subscribe_callback(self.keys.task_status, on_status)
+
+        def undeclare() -> None:
+            with contextlib.suppress(Exception):  # the session may be closing already
+                sub.undeclare()
+
+        stack.callback(undeclare)
+
     def _undeclare_subscription(self) -> None:
         with contextlib.suppress(Exception):  # the session may be closing already
             self._subscription.undeclare()
@@ -200,23 +225,25 @@ class VisionService(GrpcShell):
             return
         self._bus_frame_event.set()
 
-    async def _next_frame(self) -> tuple[RGBDFrame, float]:
+    async def _next_frame(self, prompt: bool = False) -> tuple[RGBDFrame, float]:
         """The newest frame and how long getting it took (s)."""
         t0 = time.perf_counter()
         try:
-            frame = await self._capture()
+            frame = await self._capture(prompt)
         except CameraConnectionError:
             self._capture_failures += 1
             raise
         self._capture_failures = 0
         return frame, time.perf_counter() - t0
 
-    async def _capture(self) -> RGBDFrame:
+    async def _capture(self, prompt: bool = False) -> RGBDFrame:
         if self.camera is not None:
             return await asyncio.to_thread(self.camera.capture)
-        if self._subscription is None:
+        if self._subscription is None or self.bus is None:
             raise CameraConnectionError("the vision service has no camera and no frame stream")
         self._bus_frame_event.clear()
+        if prompt:  # the twin renders it at once rather than at its next period
+            self.bus.publish(self.keys.camera_frame_requests, b"")
         try:
             async with asyncio.timeout(FRAME_WAIT_S):
                 await self._bus_frame_event.wait()
@@ -228,11 +255,14 @@ class VisionService(GrpcShell):
         return self._bus_frame
 
     # --- detection -----------------------------------------------------------------------------------
-    async def detect_once(self, frame: RGBDFrame | None = None) -> tuple[DetectionResult, RGBDFrame]:
-        """Detect on ``frame`` (or the newest one), record metrics, publish, refresh the overlay."""
+    async def detect_once(
+        self, frame: RGBDFrame | None = None, prompt: bool = False
+    ) -> tuple[DetectionResult, RGBDFrame]:
+        """Detect on ``frame`` (or the newest one), record metrics, publish, refresh the overlay.
+        ``prompt``: someone waits for it: a frame stream that takes requests is asked for a frame now."""
         capture_s = 0.0
         if frame is None:
-            frame, capture_s = await self._next_frame()
+            frame, capture_s = await self._next_frame(prompt)
         async with self._detect_lock:  # one CPU-bound detection at a time, off the event loop
             result = await asyncio.to_thread(self.pipeline.detect, frame, self.T_base_camera)
             jpeg = await asyncio.to_thread(
@@ -278,6 +308,10 @@ class VisionService(GrpcShell):
         while True:
             period = 1.0 / self.settings.vision.rate_hz  # read each time: PUT /config may change it
             t0 = time.monotonic()
+            if self.cycle.active(t0) and not self.settings.vision.live_during_cycle:
+                self.paused_periods += 1  # the cycle's own detections are published meanwhile
+                await asyncio.sleep(period)
+                continue
             try:
                 await self.detect_once()
                 failures = 0

@@ -38,11 +38,14 @@ class RecordingBus:
     def __init__(self) -> None:
         self.picks: list[task_pb2.PickEvent] = []
         self.keys: list[str] = []
+        self.statuses: list[task_pb2.TaskStatus] = []
 
     def publish(self, key: str, msg: object) -> None:
         if isinstance(msg, task_pb2.PickEvent):
             self.picks.append(msg)
             self.keys.append(key)
+        elif isinstance(msg, task_pb2.TaskStatus):
+            self.statuses.append(msg)
 
 
 class HangingRobot(FakeRobot):
@@ -218,3 +221,19 @@ async def test_a_journal_that_cannot_be_written_never_fails_the_cycle(
     assert runner.recover_records() is None
     outcome = await runner.run_cycle(TaskKind.STAND_ROD)
     assert outcome.success and bus.picks[0].status == RUNNING and bus.picks[-1].status == SUCCEEDED
+
+
+async def test_the_status_says_a_cycle_is_under_way_from_init_until_it_goes_home(
+    task_settings: Settings, tmp_path: Path
+) -> None:
+    runner, bus = runner_over(task_settings, FakeRobot(), tmp_path / "cycle.pb")
+    runner.publish_status()
+    assert not bus.statuses[-1].cycle_active  # idle before the cycle
+    outcome = await runner.run_cycle(TaskKind.STAND_ROD)
+    assert outcome.success
+    by_state = {(s.state, s.cycle_active) for s in bus.statuses}
+    for state in ("INIT", "DETECT", "PLAN", "APPROACH", "GRASP", "PLACE", "RELEASE"):
+        assert (state, True) in by_state and (state, False) not in by_state, state
+    assert ("DONE", False) in by_state  # the arm only goes home: the cell may idle there
+    runner.publish_status()
+    assert not bus.statuses[-1].cycle_active

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import asyncio
 import sys
+import time
 import types
 
 import numpy as np
 import pytest
-from pickplace.v1 import vision_pb2, vision_pb2_grpc
+from pickplace.v1 import task_pb2, vision_pb2, vision_pb2_grpc
 from prometheus_client import CollectorRegistry
 
 from services.common.bus import Bus
@@ -138,6 +139,87 @@ async def test_publishes_detections_from_the_zenoh_frame_stream(settings):
     assert msg.rod_detected and msg.calibrated and len(msg.cubes) == 2
     assert msg.header.seq >= 1 and img.jpeg[:2] == b"\xff\xd8"
     assert svc.published >= 1
+
+
+async def _until(cond, what: str, timeout_s: float = 30.0) -> None:  # type: ignore[no-untyped-def]
+    """Poll ``cond`` until true; fail naming ``what`` after a deadline only a hung service reaches."""
+    deadline = time.monotonic() + timeout_s
+    while not cond():
+        if time.monotonic() > deadline:
+            pytest.fail(f"timed out after {timeout_s} s waiting for {what}")
+        await asyncio.sleep(0.01)
+
+
+async def test_a_detection_asks_the_frame_stream_for_its_frame(settings):
+    """A stream that renders every 100 s (as the twin does at vision.rate_hz, to spare the CPU) gives
+    the Detect call its frame at once: the call asks for one (CellKeys.camera_frame_requests)."""
+    cam = SceneCamera(34)
+    keys = CellKeys(settings.cell_id)
+    loop = asyncio.get_running_loop()
+    wanted, stop = asyncio.Event(), asyncio.Event()
+    async with Bus(settings.zenoh) as bus:
+        requests = bus.subscribe_callback(
+            keys.camera_frame_requests, lambda _k, _p: loop.call_soon_threadsafe(wanted.set)
+        )
+        svc = VisionService(
+            settings,
+            bus,
+            None,
+            grpc_port=0,
+            metrics=CellMetrics(CollectorRegistry()),
+            T_base_camera=cam.scene.T_base_camera,
+            publish_loop=False,
+        )
+        async with svc, channel("127.0.0.1", svc.grpc_port) as ch:
+            feeder = asyncio.create_task(
+                publish_camera_frames(cam, bus, keys.camera_frames, 0.01, stop, wanted)
+            )
+            await _until(lambda: svc._bus_frame is not None, "the stream's first frame at the service")
+            stub = vision_pb2_grpc.VisionStub(ch)
+            reply = await stub.Detect(vision_pb2.DetectRequest(), timeout=30.0)
+            stop.set()
+            await feeder
+        requests.undeclare()
+    assert reply.objects.rod_detected
+    assert reply.objects.header.seq >= 2 and cam.n >= 2  # a frame after the first, 100 s early
+
+
+async def test_the_live_loop_gives_way_to_a_running_cycle(settings):
+    """While the task says a cycle is under way the loop detects nothing (the cycle's own Detect calls
+    still are, and are published); once it says the cycle is over, the loop goes on."""
+    cam = SceneCamera(35)
+    keys = CellKeys(settings.cell_id)
+    s = settings.model_copy(update={"vision": settings.vision.model_copy(update={"rate_hz": 20.0})})
+    active = True
+
+    async def task_status(bus: Bus) -> None:
+        while True:
+            bus.publish(keys.task_status, task_pb2.TaskStatus(state="PLAN", cycle_active=active))
+            await asyncio.sleep(0.1)
+
+    async with Bus(s.zenoh) as bus:
+        svc = VisionService(
+            s,
+            bus,
+            cam,
+            grpc_port=0,
+            metrics=CellMetrics(CollectorRegistry()),
+            T_base_camera=cam.scene.T_base_camera,
+        )
+        async with svc, channel("127.0.0.1", svc.grpc_port) as ch:
+            status = asyncio.create_task(task_status(bus))
+            try:
+                await _until(lambda: svc.paused_periods >= 1, "the loop to pause")
+                published, captured = svc.published, cam.n
+                await _until(lambda: svc.paused_periods >= 6, "more paused periods")
+                assert (svc.published, cam.n) == (published, captured)  # nothing while paused
+                reply = await vision_pb2_grpc.VisionStub(ch).Detect(vision_pb2.DetectRequest(), timeout=30.0)
+                assert reply.objects.rod_detected
+                assert (svc.published, cam.n) == (published + 1, captured + 1)  # the cycle's own: published
+                active = False
+                await _until(lambda: svc.published >= published + 3, "the loop to go on")
+            finally:
+                status.cancel()
 
 
 async def test_without_a_frame_source_detect_says_so(settings):

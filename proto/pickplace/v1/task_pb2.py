@@ -26,7 +26,7 @@ from pickplace.v1 import common_pb2 as pickplace_dot_v1_dot_common__pb2
 from pickplace.v1 import motion_pb2 as pickplace_dot_v1_dot_motion__pb2
 
 
-DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x17pickplace/v1/task.proto\x12\x0cpickplace.v1\x1a\x19pickplace/v1/common.proto\x1a\x19pickplace/v1/motion.proto\"\xf7\x01\n\nTaskStatus\x12$\n\x06header\x18\x01 \x01(\x0b\x32\x14.pickplace.v1.Header\x12\r\n\x05state\x18\x02 \x01(\t\x12\x0f\n\x07message\x18\x03 \x01(\t\x12\x10\n\x08progress\x18\x04 \x01(\x02\x12\x17\n\x0fpicks_completed\x18\x05 \x01(\x05\x12\x14\n\x0cpicks_failed\x18\x06 \x01(\x05\x12\x1a\n\x12\x61verage_cycle_time\x18\x07 \x01(\x02\x12\x0c\n\x04task\x18\x08 \x01(\t\x12\x0f\n\x07running\x18\t \x01(\x08\x12\x13\n\x0b\x63ycle_index\x18\n \x01(\x05\x12\x12\n\nlast_error\x18\x0b \x01(\t\"\x98\x04\n\tPickEvent\x12$\n\x06header\x18\x01 \x01(\x0b\x32\x14.pickplace.v1.Header\x12\x0f\n\x07pick_id\x18\x02 \x01(\t\x12\x10\n\x08robot_id\x18\x03 \x01(\t\x12\x11\n\tobject_id\x18\x04 \x01(\t\x12\x14\n\x0cobject_class\x18\x05 \x01(\t\x12%\n\tpick_pose\x18\x06 \x01(\x0b\x32\x12.pickplace.v1.Pose\x12&\n\nplace_pose\x18\x07 \x01(\x0b\x32\x12.pickplace.v1.Pose\x12\x15\n\rgrasp_quality\x18\x08 \x01(\x02\x12\x14\n\x0c\x63ycle_time_s\x18\t \x01(\x01\x12\x0f\n\x07success\x18\n \x01(\x08\x12\x15\n\rstage_reached\x18\x0b \x01(\t\x12\x16\n\x0e\x66\x61ilure_reason\x18\x0c \x01(\t\x12\x12\n\nerror_code\x18\r \x01(\t\x12G\n\x11stage_durations_s\x18\x0e \x03(\x0b\x32,.pickplace.v1.PickEvent.StageDurationsSEntry\x12\x10\n\x08\x61ttempts\x18\x0f \x01(\x05\x12\x0c\n\x04task\x18\x10 \x01(\t\x12(\n\x06status\x18\x11 \x01(\x0e\x32\x18.pickplace.v1.PickStatus\x1a\x36\n\x14StageDurationsSEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12\r\n\x05value\x18\x02 \x01(\x01:\x02\x38\x01\"0\n\x10StartTaskRequest\x12\x0c\n\x04task\x18\x01 \x01(\t\x12\x0e\n\x06\x63ycles\x18\x02 \x01(\x05\"\x11\n\x0fStopTaskRequest\"\x1a\n\x18TaskEmergencyStopRequest\"\"\n\x12SingleCycleRequest\x12\x0c\n\x04task\x18\x01 \x01(\t\"\x16\n\x14GetTaskStatusRequest\"\xa7\x01\n\x08TaskPlan\x12$\n\x06header\x18\x01 \x01(\x0b\x32\x14.pickplace.v1.Header\x12\x13\n\x0b\x63ycle_index\x18\x02 \x01(\x04\x12\r\n\x05label\x18\x03 \x01(\t\x12&\n\ttool_path\x18\x04 \x03(\x0b\x32\x13.pickplace.v1.Point\x12)\n\x05\x62oxes\x18\x05 \x03(\x0b\x32\x1a.pickplace.v1.CollisionBox*\x92\x01\n\nPickStatus\x12\x1b\n\x17PICK_STATUS_UNSPECIFIED\x10\x00\x12\x17\n\x13PICK_STATUS_RUNNING\x10\x01\x12\x19\n\x15PICK_STATUS_SUCCEEDED\x10\x02\x12\x16\n\x12PICK_STATUS_FAILED\x10\x03\x12\x1b\n\x17PICK_STATUS_INTERRUPTED\x10\x04\x32\xde\x03\n\x0eTaskController\x12\x46\n\x05Start\x12\x1e.pickplace.v1.StartTaskRequest\x1a\x1d.pickplace.v1.CommandResponse\x12\x44\n\x04Stop\x12\x1d.pickplace.v1.StopTaskRequest\x1a\x1d.pickplace.v1.CommandResponse\x12V\n\rEmergencyStop\x12&.pickplace.v1.TaskEmergencyStopRequest\x1a\x1d.pickplace.v1.CommandResponse\x12K\n\x0eRunSingleCycle\x12 .pickplace.v1.SingleCycleRequest\x1a\x17.pickplace.v1.PickEvent\x12I\n\tGetStatus\x12\".pickplace.v1.GetTaskStatusRequest\x1a\x18.pickplace.v1.TaskStatus\x12N\n\x0cStreamStatus\x12\".pickplace.v1.GetTaskStatusRequest\x1a\x18.pickplace.v1.TaskStatus0\x01\x62\x06proto3')
+DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x17pickplace/v1/task.proto\x12\x0cpickplace.v1\x1a\x19pickplace/v1/common.proto\x1a\x19pickplace/v1/motion.proto\"\x8d\x02\n\nTaskStatus\x12$\n\x06header\x18\x01 \x01(\x0b\x32\x14.pickplace.v1.Header\x12\r\n\x05state\x18\x02 \x01(\t\x12\x0f\n\x07message\x18\x03 \x01(\t\x12\x10\n\x08progress\x18\x04 \x01(\x02\x12\x17\n\x0fpicks_completed\x18\x05 \x01(\x05\x12\x14\n\x0cpicks_failed\x18\x06 \x01(\x05\x12\x1a\n\x12\x61verage_cycle_time\x18\x07 \x01(\x02\x12\x0c\n\x04task\x18\x08 \x01(\t\x12\x0f\n\x07running\x18\t \x01(\x08\x12\x13\n\x0b\x63ycle_index\x18\n \x01(\x05\x12\x12\n\nlast_error\x18\x0b \x01(\t\x12\x14\n\x0c\x63ycle_active\x18\x0c \x01(\x08\"\x98\x04\n\tPickEvent\x12$\n\x06header\x18\x01 \x01(\x0b\x32\x14.pickplace.v1.Header\x12\x0f\n\x07pick_id\x18\x02 \x01(\t\x12\x10\n\x08robot_id\x18\x03 \x01(\t\x12\x11\n\tobject_id\x18\x04 \x01(\t\x12\x14\n\x0cobject_class\x18\x05 \x01(\t\x12%\n\tpick_pose\x18\x06 \x01(\x0b\x32\x12.pickplace.v1.Pose\x12&\n\nplace_pose\x18\x07 \x01(\x0b\x32\x12.pickplace.v1.Pose\x12\x15\n\rgrasp_quality\x18\x08 \x01(\x02\x12\x14\n\x0c\x63ycle_time_s\x18\t \x01(\x01\x12\x0f\n\x07success\x18\n \x01(\x08\x12\x15\n\rstage_reached\x18\x0b \x01(\t\x12\x16\n\x0e\x66\x61ilure_reason\x18\x0c \x01(\t\x12\x12\n\nerror_code\x18\r \x01(\t\x12G\n\x11stage_durations_s\x18\x0e \x03(\x0b\x32,.pickplace.v1.PickEvent.StageDurationsSEntry\x12\x10\n\x08\x61ttempts\x18\x0f \x01(\x05\x12\x0c\n\x04task\x18\x10 \x01(\t\x12(\n\x06status\x18\x11 \x01(\x0e\x32\x18.pickplace.v1.PickStatus\x1a\x36\n\x14StageDurationsSEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12\r\n\x05value\x18\x02 \x01(\x01:\x02\x38\x01\"0\n\x10StartTaskRequest\x12\x0c\n\x04task\x18\x01 \x01(\t\x12\x0e\n\x06\x63ycles\x18\x02 \x01(\x05\"\x11\n\x0fStopTaskRequest\"\x1a\n\x18TaskEmergencyStopRequest\"\"\n\x12SingleCycleRequest\x12\x0c\n\x04task\x18\x01 \x01(\t\"\x16\n\x14GetTaskStatusRequest\"\xa7\x01\n\x08TaskPlan\x12$\n\x06header\x18\x01 \x01(\x0b\x32\x14.pickplace.v1.Header\x12\x13\n\x0b\x63ycle_index\x18\x02 \x01(\x04\x12\r\n\x05label\x18\x03 \x01(\t\x12&\n\ttool_path\x18\x04 \x03(\x0b\x32\x13.pickplace.v1.Point\x12)\n\x05\x62oxes\x18\x05 \x03(\x0b\x32\x1a.pickplace.v1.CollisionBox*\x92\x01\n\nPickStatus\x12\x1b\n\x17PICK_STATUS_UNSPECIFIED\x10\x00\x12\x17\n\x13PICK_STATUS_RUNNING\x10\x01\x12\x19\n\x15PICK_STATUS_SUCCEEDED\x10\x02\x12\x16\n\x12PICK_STATUS_FAILED\x10\x03\x12\x1b\n\x17PICK_STATUS_INTERRUPTED\x10\x04\x32\xde\x03\n\x0eTaskController\x12\x46\n\x05Start\x12\x1e.pickplace.v1.StartTaskRequest\x1a\x1d.pickplace.v1.CommandResponse\x12\x44\n\x04Stop\x12\x1d.pickplace.v1.StopTaskRequest\x1a\x1d.pickplace.v1.CommandResponse\x12V\n\rEmergencyStop\x12&.pickplace.v1.TaskEmergencyStopRequest\x1a\x1d.pickplace.v1.CommandResponse\x12K\n\x0eRunSingleCycle\x12 .pickplace.v1.SingleCycleRequest\x1a\x17.pickplace.v1.PickEvent\x12I\n\tGetStatus\x12\".pickplace.v1.GetTaskStatusRequest\x1a\x18.pickplace.v1.TaskStatus\x12N\n\x0cStreamStatus\x12\".pickplace.v1.GetTaskStatusRequest\x1a\x18.pickplace.v1.TaskStatus0\x01\x62\x06proto3')
 
 _globals = globals()
 _builder.BuildMessageAndEnumDescriptors(DESCRIPTOR, _globals)
@@ -35,26 +35,26 @@ if not _descriptor._USE_C_DESCRIPTORS:
   DESCRIPTOR._loaded_options = None
   _globals['_PICKEVENT_STAGEDURATIONSSENTRY']._loaded_options = None
   _globals['_PICKEVENT_STAGEDURATIONSSENTRY']._serialized_options = b'8\001'
-  _globals['_PICKSTATUS']._serialized_start=1212
-  _globals['_PICKSTATUS']._serialized_end=1358
+  _globals['_PICKSTATUS']._serialized_start=1234
+  _globals['_PICKSTATUS']._serialized_end=1380
   _globals['_TASKSTATUS']._serialized_start=96
-  _globals['_TASKSTATUS']._serialized_end=343
-  _globals['_PICKEVENT']._serialized_start=346
-  _globals['_PICKEVENT']._serialized_end=882
-  _globals['_PICKEVENT_STAGEDURATIONSSENTRY']._serialized_start=828
-  _globals['_PICKEVENT_STAGEDURATIONSSENTRY']._serialized_end=882
-  _globals['_STARTTASKREQUEST']._serialized_start=884
-  _globals['_STARTTASKREQUEST']._serialized_end=932
-  _globals['_STOPTASKREQUEST']._serialized_start=934
-  _globals['_STOPTASKREQUEST']._serialized_end=951
-  _globals['_TASKEMERGENCYSTOPREQUEST']._serialized_start=953
-  _globals['_TASKEMERGENCYSTOPREQUEST']._serialized_end=979
-  _globals['_SINGLECYCLEREQUEST']._serialized_start=981
-  _globals['_SINGLECYCLEREQUEST']._serialized_end=1015
-  _globals['_GETTASKSTATUSREQUEST']._serialized_start=1017
-  _globals['_GETTASKSTATUSREQUEST']._serialized_end=1039
-  _globals['_TASKPLAN']._serialized_start=1042
-  _globals['_TASKPLAN']._serialized_end=1209
-  _globals['_TASKCONTROLLER']._serialized_start=1361
-  _globals['_TASKCONTROLLER']._serialized_end=1839
+  _globals['_TASKSTATUS']._serialized_end=365
+  _globals['_PICKEVENT']._serialized_start=368
+  _globals['_PICKEVENT']._serialized_end=904
+  _globals['_PICKEVENT_STAGEDURATIONSSENTRY']._serialized_start=850
+  _globals['_PICKEVENT_STAGEDURATIONSSENTRY']._serialized_end=904
+  _globals['_STARTTASKREQUEST']._serialized_start=906
+  _globals['_STARTTASKREQUEST']._serialized_end=954
+  _globals['_STOPTASKREQUEST']._serialized_start=956
+  _globals['_STOPTASKREQUEST']._serialized_end=973
+  _globals['_TASKEMERGENCYSTOPREQUEST']._serialized_start=975
+  _globals['_TASKEMERGENCYSTOPREQUEST']._serialized_end=1001
+  _globals['_SINGLECYCLEREQUEST']._serialized_start=1003
+  _globals['_SINGLECYCLEREQUEST']._serialized_end=1037
+  _globals['_GETTASKSTATUSREQUEST']._serialized_start=1039
+  _globals['_GETTASKSTATUSREQUEST']._serialized_end=1061
+  _globals['_TASKPLAN']._serialized_start=1064
+  _globals['_TASKPLAN']._serialized_end=1231
+  _globals['_TASKCONTROLLER']._serialized_start=1383
+  _globals['_TASKCONTROLLER']._serialized_end=1861
 # @@protoc_insertion_point(module_scope)

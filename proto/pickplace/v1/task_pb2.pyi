@@ -23,7 +23,7 @@ PICK_STATUS_FAILED: PickStatus
 PICK_STATUS_INTERRUPTED: PickStatus
 
 class TaskStatus(_message.Message):
-    __slots__ = ("header", "state", "message", "progress", "picks_completed", "picks_failed", "average_cycle_time", "task", "running", "cycle_index", "last_error")
+    __slots__ = ("header", "state", "message", "progress", "picks_completed", "picks_failed", "average_cycle_time", "task", "running", "cycle_index", "last_error", "cycle_active")
     HEADER_FIELD_NUMBER: _ClassVar[int]
     STATE_FIELD_NUMBER: _ClassVar[int]
     MESSAGE_FIELD_NUMBER: _ClassVar[int]
@@ -35,6 +35,7 @@ class TaskStatus(_message.Message):
     RUNNING_FIELD_NUMBER: _ClassVar[int]
     CYCLE_INDEX_FIELD_NUMBER: _ClassVar[int]
     LAST_ERROR_FIELD_NUMBER: _ClassVar[int]
+    CYCLE_ACTIVE_FIELD_NUMBER: _ClassVar[int]
     header: _common_pb2.Header
     state: str
     message: str
@@ -46,7 +47,8 @@ class TaskStatus(_message.Message):
     running: bool
     cycle_index: int
     last_error: str
-    def __init__(self, header: _Optional[_Union[_common_pb2.Header, _Mapping]] = ..., state: _Optional[str] = ..., message: _Optional[str] = ..., progress: _Optional[float] = ..., picks_completed: _Optional[int] = ..., picks_failed: _Optional[int] = ..., average_cycle_time: _Optional[float] = ..., task: _Optional[str] = ..., running: _Optional[bool] = ..., cycle_index: _Optional[int] = ..., last_error: _Optional[str] = ...) -> None: ...
+    cycle_active: bool
+    def __init__(self, header: _Optional[_Union[_common_pb2.Header, _Mapping]] = ..., state: _Optional[str] = ..., message: _Optional[str] = ..., progress: _Optional[float] = ..., picks_completed: _Optional[int] = ..., picks_failed: _Optional[int] = ..., average_cycle_time: _Optional[float] = ..., task: _Optional[str] = ..., running: _Optional[bool] = ..., cycle_index: _Optional[int] = ..., last_error: _Optional[str] = ..., cycle_active: _Optional[bool] = ...) -> None: ...
 
 class PickEvent(_message.Message):
     __slots__ = ("header", "pick_id", "robot_id", "object_id", "object_class", "pick_pose", "place_pose", "grasp_quality", "cycle_time_s", "success", "stage_reached", "failure_reason", "error_code", "stage_durations_s", "attempts", "task", "status")
