@@ -10,6 +10,7 @@ import asyncio
 import contextlib
 import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
@@ -152,18 +153,22 @@ async def publish_camera_frames(
     rate_hz: float,
     stop: asyncio.Event,
     wanted: asyncio.Event | None = None,
+    paused: Callable[[], bool] | None = None,
 ) -> int:
     """Stream a camera's frames onto Zenoh (for ``vision.camera.source: bus`` consumers); returns the
-    count. ``wanted`` set: the next frame is taken at once instead of at the end of the period."""
+    count. ``wanted`` set: the next frame is taken at once instead of at the end of the period;
+    ``paused()`` true: a period passes without a frame (one that is wanted is still taken)."""
     period = 1.0 / rate_hz
     n = 0
     while not stop.is_set():
         t0 = time.monotonic()
+        asked = wanted is not None and wanted.is_set()
         if wanted is not None:
             wanted.clear()  # a request from here on asks for a frame after this one
-        frame = await asyncio.to_thread(camera.capture)
-        bus.publish(key, frame_to_msg(frame))
-        n += 1
+        if asked or paused is None or not paused():
+            frame = await asyncio.to_thread(camera.capture)
+            bus.publish(key, frame_to_msg(frame))
+            n += 1
         with contextlib.suppress(TimeoutError):
             async with asyncio.timeout(max(0.0, period - (time.monotonic() - t0))):
                 await _first_of(stop, wanted)

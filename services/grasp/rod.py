@@ -108,11 +108,13 @@ def plan_pick_and_stand(
     place_xy: ArrayLike | None = None,
     collision_check: CollisionCheck | None = None,
     alternative: int = 0,
+    other_branches: bool = False,
 ) -> PickPlan:
     """The waypoint plan that picks ``rod`` and stands it upright at ``place_xy`` (default: config).
 
     ``alternative`` = k > 0 returns the k-th next-best feasible wrist option instead of the best
-    (for recovery: replan with a different grasp or approach).
+    (for recovery: replan with a different grasp or approach). ``other_branches``: when every option's
+    cheapest IK branch collides, try their costlier branches (a last resort: longer, wider joint moves).
     """
     if not (isinstance(alternative, int) and alternative >= 0):
         raise InvalidInputError(f"alternative must be a non-negative integer, got {alternative!r}")
@@ -191,8 +193,10 @@ def plan_pick_and_stand(
             )
     # every option's cheapest IK branch collided or was passed over: their other branches, in the
     # same order (the cheapest may take the elbow down to the table where another clears it; seed
-    # 1912 saw an axis 0.4° off the one that planned leave all 144 options colliding)
-    for o, others, n_ranked in colliding:
+    # 1912 saw an axis 0.4° off the one that planned leave all 144 options colliding). Only when asked:
+    # another grasp offset on a cheapest branch is the better plan (a costlier branch's joint move from
+    # the safe home swept the tool 1.2 m up, past the workspace, where the next offset planned)
+    for o, others, n_ranked in colliding if other_branches else ():
         for cost, q_path in others:
             if collision_check is not None and _first_collision(o, q_path, collision_check):
                 continue

@@ -142,6 +142,7 @@ class GraspPlannerServicer(grasp_pb2_grpc.GraspPlannerServicer):
                 place_xy=list(request.place_xy) if len(request.place_xy) else None,
                 collision_check=check,
                 alternative=request.alternative,
+                other_branches=request.other_ik_branches,
             )
             return plan_to_proto(plan, time.perf_counter() - t0, time.time_ns())
 

@@ -19,9 +19,11 @@ import contextlib
 import json
 import logging
 import threading
+import time
 from typing import TYPE_CHECKING, Any
 
 from services.common.bus import Bus
+from services.common.cycle_watch import CycleWatch, follow_cycles
 from services.common.errors import InvalidInputError, RobotCommunicationError
 from services.common.keys import CellKeys
 from services.common.live_config import with_twin
@@ -105,6 +107,8 @@ class SimBusLink(ServiceShell):
         self.resets = 0
         self._loop: asyncio.AbstractEventLoop | None = None
         self._reset = SceneReset(server, settings)
+        self.cycle = CycleWatch()  # periodic frames pause while the task runs a cycle
+        self.paused_periods = 0
 
     async def _start(self, stack: contextlib.AsyncExitStack) -> None:
         from services.common.sensors import publish_camera_frames
@@ -133,10 +137,18 @@ class SimBusLink(ServiceShell):
 
             requests = self.bus.subscribe_callback(keys.camera_frame_requests, on_request)
             stack.callback(self._undeclare, requests)
+            # while a cycle runs only its own detections take frames (vision's live loop pauses too)
+            follow_cycles(self.bus, self.settings.cell_id, self.cycle, stack)
             # runs until the shell cancels it (the stop event is for callers that stop it themselves)
             self.spawn(
                 publish_camera_frames(
-                    self.camera, self.bus, keys.camera_frames, self.frame_rate, asyncio.Event(), wanted
+                    self.camera,
+                    self.bus,
+                    keys.camera_frames,
+                    self.frame_rate,
+                    asyncio.Event(),
+                    wanted,
+                    self._frames_paused,
                 ),
                 "frames",
             )
@@ -149,6 +161,11 @@ class SimBusLink(ServiceShell):
             keys.camera_frames,
             keys.sim_scene_reset,
         )
+
+    def _frames_paused(self) -> bool:
+        paused = not self.settings.vision.live_during_cycle and self.cycle.active(time.monotonic())
+        self.paused_periods += paused
+        return paused
 
     @staticmethod
     def _undeclare(queryable: Any) -> None:

@@ -187,6 +187,7 @@ class GrpcGrasp:
         alternative: int,
         place_xy: np.ndarray | None = None,
         grasp_offset_m: float | None = None,
+        other_branches: bool = False,
     ) -> GraspPlan:
         req = grasp_pb2.PickAndStandRequest(
             center=rod.center.tolist(),
@@ -197,6 +198,7 @@ class GrpcGrasp:
             obstacles=boxes_msg(obstacles),
             alternative=alternative,
             place_xy=[] if place_xy is None else list(map(float, place_xy)),
+            other_ik_branches=other_branches,
         )
         if grasp_offset_m is not None:
             req.grasp_offset = grasp_offset_m

@@ -91,7 +91,16 @@ class PickPlanning:
                 cfg.jaw_clearance_m,
             )
             offset = offsets[alternative % len(offsets)]
-            plan = await self.grasp.plan_rod(rod, q, obstacles, alternative // len(offsets), place, offset)
+            # once every offset failed on the cheapest IK branches, costlier branches may be taken too
+            plan = await self.grasp.plan_rod(
+                rod,
+                q,
+                obstacles,
+                alternative // len(offsets),
+                place,
+                offset,
+                other_branches=alternative >= len(offsets),
+            )
             out.object_id = object_id(rod)
         else:
             if target_cube is None:

@@ -100,6 +100,7 @@ class GraspPort(Protocol):
         alternative: int,
         place_xy: np.ndarray | None = None,
         grasp_offset_m: float | None = None,
+        other_branches: bool = False,
     ) -> GraspPlan: ...
 
     async def plan_cube(

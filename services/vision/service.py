@@ -25,10 +25,11 @@ from typing import Any
 
 import grpc
 import numpy as np
-from pickplace.v1 import common_pb2, task_pb2, vision_pb2, vision_pb2_grpc
+from pickplace.v1 import common_pb2, vision_pb2, vision_pb2_grpc
 
 from services.common.bus import Bus
 from services.common.camera_pose import load_T_base_camera
+from services.common.cycle_watch import CycleWatch, follow_cycles
 from services.common.errors import (
     CameraConnectionError,
     ConfigurationError,
@@ -46,7 +47,6 @@ from services.common.sensors import (
 )
 from services.common.settings import CameraSourceSettings, Settings
 from services.common.shell import GrpcShell, cell_token
-from services.vision.cycle_watch import CycleWatch
 from services.vision.messages import detections_msg
 from services.vision.overlay import overlay_jpeg
 from services.vision.pipeline import VisionPipeline, replace_timings
@@ -159,8 +159,8 @@ class VisionService(GrpcShell):
 
             self._subscription = self.bus.subscribe_callback(self.keys.camera_frames, on_frame)
             stack.callback(self._undeclare_subscription)
-        if self.bus is not None:
-            self._follow_task(self.bus, stack)
+        if self.bus is not None:  # the live loop gives way to a running cycle
+            follow_cycles(self.bus, self.settings.cell_id, self.cycle, stack)
         await self._serve_grpc(
             stack,
             lambda server: vision_pb2_grpc.add_VisionServicer_to_server(VisionServicer(self), server),
@@ -185,26 +185,6 @@ class VisionService(GrpcShell):
         self.settings = new
         if any(c.startswith("vision.") for c in changed):
             self.pipeline.settings = new.vision
-
-    def _follow_task(self, bus: Bus, stack: contextlib.AsyncExitStack) -> None:
-        """Whether the task runs a cycle, from its status on the bus (the live loop gives way to it)."""
-        loop = asyncio.get_running_loop()
-
-        def on_status(_key: str, payload: bytes) -> None:  # a Zenoh thread
-            try:
-                active = task_pb2.TaskStatus.FromString(payload).cycle_active
-            except Exception as exc:  # a bad status must not stop the service
-                log.debug("ignoring an undecodable task status: %s", exc)
-                return
-            loop.call_soon_threadsafe(self.cycle.on_status, active, time.monotonic())
-
-        sub = bus.subscribe_callback(self.keys.task_status, on_status)
-
-        def undeclare() -> None:
-            with contextlib.suppress(Exception):  # the session may be closing already
-                sub.undeclare()
-
-        stack.callback(undeclare)
 
     def _undeclare_subscription(self) -> None:
         with contextlib.suppress(Exception):  # the session may be closing already

@@ -315,9 +315,6 @@ def test_a_far_rod_along_y_is_turned_upright_nearer_the_base(monkeypatch: pytest
 
     only_over_the_grasp = rod_planner._turn_sites
     monkeypatch.setattr(rod_planner, "_turn_sites", lambda g, xy, cfg: only_over_the_grasp(g, xy, cfg)[:1])
-    monkeypatch.setattr(
-        "services.grasp.reach.MAX_ALTERNATIVE_TRACKS", 0
-    )  # over the grasp, a costlier branch could
     with pytest.raises(CollisionError, match="no feasible pick-and-stand"):
         plan(FAR_ROD, collision_check=check, place_xy=FAR_ROD_PLACE)
 
@@ -337,14 +334,12 @@ SEED_1912_BOXES = [
 ]
 
 
-def test_another_ik_branch_is_taken_when_every_cheapest_one_collides(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_another_ik_branch_is_taken_when_asked_and_every_cheapest_one_collides() -> None:
     check = MotionCollisionCheck.from_settings(SETTINGS, SEED_1912_BOXES)
     place = [0.37609, 0.03061]
-    monkeypatch.setattr("services.grasp.reach.MAX_ALTERNATIVE_TRACKS", 0)
     with pytest.raises(CollisionError, match="with table"):
-        plan(SEED_1912_ROD, collision_check=check, place_xy=place)
-    monkeypatch.undo()
-    p = plan(SEED_1912_ROD, collision_check=check, place_xy=place)
+        plan(SEED_1912_ROD, collision_check=check, place_xy=place)  # not asked: the cheapest only
+    p = plan(SEED_1912_ROD, collision_check=check, place_xy=place, other_branches=True)
     for w in p.waypoints:
         held = p.held if w.holding else None
         assert not check(w.q, held), f"{w.name}: {check.explain(w.q, held)}"

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import asyncio
 import os
+import time
 
 import pytest
-from pickplace.v1 import vision_pb2
+from pickplace.v1 import task_pb2, vision_pb2
 
 from services.common.bus import Bus
 from services.common.keys import CellKeys
@@ -37,3 +38,49 @@ async def test_a_frame_request_is_answered_before_the_period(settings: Settings)
         frames.close()
     assert second.header.seq == first.header.seq + 1
     assert second.header.stamp_ns >= first.header.stamp_ns
+
+
+async def test_periodic_frames_pause_while_a_cycle_runs(settings: Settings) -> None:
+    """While the task says a cycle is under way the twin renders only the frames asked for (vision's
+    Detect calls): its periodic renders took the CPU the cycle's planning waits for."""
+    s = settings.model_copy(
+        update={
+            "sim": settings.sim.model_copy(
+                update={"engine": "twin", "dashboard_port": 0, "feedback_port": 0, "slow_feedback_port": 0}
+            )
+        }
+    )
+    keys = CellKeys(s.cell_id)
+
+    async def task_status(bus: Bus) -> None:
+        while True:
+            bus.publish(keys.task_status, task_pb2.TaskStatus(state="PLACE", cycle_active=True))
+            await asyncio.sleep(0.1)
+
+    async with build_sim_server(s) as server, Bus(s.zenoh) as bus:
+        seqs: list[int] = []  # of the frames received, in order (appended on a Zenoh thread)
+        sub = bus.subscribe_callback(
+            keys.camera_frames, lambda _k, p: seqs.append(vision_pb2.RGBDFrame.FromString(p).header.seq)
+        )
+        async with SimBusLink(s, server, bus, frame_rate=20.0) as link:
+            status = asyncio.create_task(task_status(bus))
+            try:
+                await _until(lambda: link.paused_periods >= 1, "the periodic frames to pause")
+                assert link.camera is not None
+                rendered = link.camera._camera._seq  # the twin camera's frame count: none in flight now
+                await _until(lambda: rendered == 0 or rendered in seqs, "the last frame before the pause")
+                await _until(lambda: link.paused_periods >= 8, "more paused periods")
+                assert link.camera._camera._seq == rendered  # nothing rendered while paused
+                bus.publish(keys.camera_frame_requests, b"")
+                await _until(lambda: rendered + 1 in seqs, "the frame asked for")  # a Detect's frame still is
+            finally:
+                status.cancel()
+        sub.undeclare()
+
+
+async def _until(cond, what: str, timeout_s: float = 60.0) -> None:  # type: ignore[no-untyped-def]
+    deadline = time.monotonic() + timeout_s
+    while not cond():
+        if time.monotonic() > deadline:
+            pytest.fail(f"timed out after {timeout_s} s waiting for {what}")
+        await asyncio.sleep(0.01)

@@ -84,6 +84,7 @@ class GraspCall:
     grasp_offset_m: float | None
     q_now: tuple[float, ...]
     target_z: float | None = None  # how high the object to pick was taken to lie
+    other_branches: bool = False
 
 
 def _wp(name: str, kind: MotionKind, p: Sequence[float], **kw: object) -> PlannedWaypoint:
@@ -122,8 +123,11 @@ class FakeGrasp:
         alternative: int,
         place_xy: np.ndarray | None = None,
         grasp_offset_m: float | None = None,
+        other_branches: bool = False,
     ) -> GraspPlan:
-        self._record(GraspCall("rod", alternative, grasp_offset_m, tuple(q_now), float(rod.center[2])))
+        self._record(
+            GraspCall("rod", alternative, grasp_offset_m, tuple(q_now), float(rod.center[2]), other_branches)
+        )
         x, y = rod.center[0] + (grasp_offset_m or 0.0), rod.center[1]
         px, py = (0.45, 0.0) if place_xy is None else map(float, place_xy)
         waypoints = [

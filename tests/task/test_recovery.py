@@ -507,3 +507,23 @@ async def test_a_safety_stop_hands_over_to_the_operator_and_nothing_is_cleared()
     with pytest.raises(EmergencyStopError, match="release it"):
         await cell.run()
     assert cell.states[-2:] == [CycleState.INIT, CycleState.ESTOP]
+
+
+async def test_costlier_ik_branches_are_asked_for_only_once_every_grasp_offset_failed() -> None:
+    offsets = FakeCell(FakeVision(seen())).config.grasp_offsets_m
+    n = len(offsets)
+    config = replace(
+        FakeCell(FakeVision(seen())).config,
+        limits=RetryLimits(detect=2, grasp_variants=n + 1, alarms=2, regrasps=1),
+    )
+    cell = FakeCell(
+        FakeVision(seen(rod_at(0.5, 0.1))),
+        grasp=FakeGrasp({k: CollisionError("every wrist option collides") for k in range(n)}),
+        config=config,
+    )
+    outcome = await cell.run()
+    assert outcome.success and outcome.attempts == n + 1
+    calls = cell.grasp.calls
+    assert [c.other_branches for c in calls] == [False] * n + [True]
+    assert sorted(c.grasp_offset_m for c in calls[:n]) == sorted(offsets)  # each offset on its cheapest
+    assert calls[n].alternative == 1

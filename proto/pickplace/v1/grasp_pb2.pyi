@@ -162,7 +162,7 @@ class PickPlan(_message.Message):
     def __init__(self, header: _Optional[_Union[_common_pb2.Header, _Mapping]] = ..., task: _Optional[str] = ..., waypoints: _Optional[_Iterable[_Union[PickWaypoint, _Mapping]]] = ..., grasp: _Optional[_Union[GraspCandidate, _Mapping]] = ..., held_object: _Optional[_Union[_motion_pb2.AttachedObject, _Mapping]] = ..., place_position: _Optional[_Iterable[float]] = ..., metrics: _Optional[_Mapping[str, float]] = ..., summary: _Optional[str] = ..., planning_time_s: _Optional[float] = ...) -> None: ...
 
 class PickAndStandRequest(_message.Message):
-    __slots__ = ("center", "axis", "length", "diameter", "current_joints", "place_xy", "obstacles", "alternative", "grasp_offset")
+    __slots__ = ("center", "axis", "length", "diameter", "current_joints", "place_xy", "obstacles", "alternative", "grasp_offset", "other_ik_branches")
     CENTER_FIELD_NUMBER: _ClassVar[int]
     AXIS_FIELD_NUMBER: _ClassVar[int]
     LENGTH_FIELD_NUMBER: _ClassVar[int]
@@ -172,6 +172,7 @@ class PickAndStandRequest(_message.Message):
     OBSTACLES_FIELD_NUMBER: _ClassVar[int]
     ALTERNATIVE_FIELD_NUMBER: _ClassVar[int]
     GRASP_OFFSET_FIELD_NUMBER: _ClassVar[int]
+    OTHER_IK_BRANCHES_FIELD_NUMBER: _ClassVar[int]
     center: _containers.RepeatedScalarFieldContainer[float]
     axis: _containers.RepeatedScalarFieldContainer[float]
     length: float
@@ -181,7 +182,8 @@ class PickAndStandRequest(_message.Message):
     obstacles: _containers.RepeatedCompositeFieldContainer[_motion_pb2.CollisionBox]
     alternative: int
     grasp_offset: float
-    def __init__(self, center: _Optional[_Iterable[float]] = ..., axis: _Optional[_Iterable[float]] = ..., length: _Optional[float] = ..., diameter: _Optional[float] = ..., current_joints: _Optional[_Iterable[float]] = ..., place_xy: _Optional[_Iterable[float]] = ..., obstacles: _Optional[_Iterable[_Union[_motion_pb2.CollisionBox, _Mapping]]] = ..., alternative: _Optional[int] = ..., grasp_offset: _Optional[float] = ...) -> None: ...
+    other_ik_branches: bool
+    def __init__(self, center: _Optional[_Iterable[float]] = ..., axis: _Optional[_Iterable[float]] = ..., length: _Optional[float] = ..., diameter: _Optional[float] = ..., current_joints: _Optional[_Iterable[float]] = ..., place_xy: _Optional[_Iterable[float]] = ..., obstacles: _Optional[_Iterable[_Union[_motion_pb2.CollisionBox, _Mapping]]] = ..., alternative: _Optional[int] = ..., grasp_offset: _Optional[float] = ..., other_ik_branches: _Optional[bool] = ...) -> None: ...
 
 class PickAndPlaceRequest(_message.Message):
     __slots__ = ("cube_pose", "size", "color", "current_joints", "obstacles", "alternative")

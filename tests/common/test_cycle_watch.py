@@ -1,8 +1,8 @@
-"""The vision service's view of whether a cycle runs (pure; the service test covers the bus)."""
+"""Whether a cycle runs, from the task's status (pure; the vision and sim tests cover the bus)."""
 
 from __future__ import annotations
 
-from services.vision.cycle_watch import CycleWatch
+from services.common.cycle_watch import CycleWatch
 
 
 def test_active_from_a_status_saying_so_until_one_says_otherwise() -> None:
