@@ -198,6 +198,8 @@ def plan_pick_and_stand(
     # the safe home swept the tool 1.2 m up, past the workspace, where the next offset planned)
     for o, others, n_ranked in colliding if other_branches else ():
         for cost, q_path in others:
+            if not _elbow_as_at(home, q_path):
+                continue
             if collision_check is not None and _first_collision(o, q_path, collision_check):
                 continue
             if skipped < alternative:
@@ -211,6 +213,13 @@ def plan_pick_and_stand(
             f"alternative {alternative} requested but the rod has only {skipped} feasible wrist option(s)"
         )
     raise _no_plan_error(rod, center, tried)
+
+
+def _elbow_as_at(home: Array, q_path: Array) -> bool:
+    """Whether the elbow (joint 3) bends the same way along ``q_path`` as at ``home``: a joint move from
+    home to a branch with the elbow the other way straightens the arm on the way, the tool straight up
+    past the workspace's top (seen at 1.2 m in randomized evals)."""
+    return bool(np.all(np.sign(q_path[:, 2]) == np.sign(home[2])))
 
 
 def _turn_sites(grasp_pt: Array, p_xy: Array, cfg: GraspSettings) -> list[Array]:

@@ -346,3 +346,18 @@ def test_another_ik_branch_is_taken_when_asked_and_every_cheapest_one_collides()
         assert np.allclose(fk(SPEC, w.q) @ T_FLANGE_TOOL, w.T_base_tool, atol=1e-6), w.name
     steps = np.abs(np.diff([w.q for w in p.waypoints if w.name in NAMES[2:8]], axis=0))
     assert p.notes["joint_motion_rad"] >= float(steps.max(axis=1).sum()) - 1e-9  # its cost is its own
+
+
+def test_a_costlier_branch_keeps_the_elbow_bent_the_way_it_is_at_home() -> None:
+    """A joint move from the safe home to a branch with the elbow bent the other way straightens the arm on
+    the way: the tool went 1.2 m up, past the workspace (7 of 200 randomized trials, when costlier branches
+    were taken before other grasp offsets)."""
+    from services.grasp.rod import _elbow_as_at
+
+    path = np.tile(HOME, (5, 1))
+    assert _elbow_as_at(HOME, path)
+    path[3, 2] = -0.3
+    assert not _elbow_as_at(HOME, path)
+    check = MotionCollisionCheck.from_settings(SETTINGS, SEED_1912_BOXES)
+    p = plan(SEED_1912_ROD, collision_check=check, place_xy=[0.37609, 0.03061], other_branches=True)
+    assert all(np.sign(w.q[2]) == np.sign(HOME[2]) for w in p.waypoints)
