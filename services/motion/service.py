@@ -58,11 +58,24 @@ def _joints(values: Iterable[float], name: str) -> Array:
     return arr
 
 
-def scene_from_proto(msg: motion_pb2.PlanningScene, motion: MotionSettings) -> Scene:
+CEILING_HALF_SPAN_M = 10.0  # the box standing for the workspace's top: wider than any arm's reach
+
+
+def scene_from_proto(
+    msg: motion_pb2.PlanningScene, motion: MotionSettings, ceiling_z: float | None = None
+) -> Scene:
+    """The planning scene of a request; ``ceiling_z``: the workspace's top (robot.workspace), a box above
+    it, so a move is planned below it rather than refused by the driver's workspace check (a joint move
+    that straightens the arm puts the tool 1.2 m up)."""
     boxes = []
     for k, b in enumerate(msg.boxes):
         boxes.append(
             Box.from_bounds(b.x_min, b.x_max, b.y_min, b.y_max, b.z_min, b.z_max, name=b.name or f"box{k}")
+        )
+    if ceiling_z is not None:
+        span = CEILING_HALF_SPAN_M
+        boxes.append(
+            Box.from_bounds(-span, span, -span, span, ceiling_z, ceiling_z + 1.0, name="workspace top")
         )
     attached = None
     if msg.HasField("attached"):
@@ -149,7 +162,7 @@ class MotionPlannerServicer(motion_pb2_grpc.MotionPlannerServicer):
     def _planner(self, scene: motion_pb2.PlanningScene, opts: motion_pb2.MotionOptions) -> MotionPlanner:
         return MotionPlanner(
             self._arm(opts.robot_model),
-            scene_from_proto(scene, self.motion),
+            scene_from_proto(scene, self.motion, ceiling_z=self.settings.robot.workspace.max[2]),
             config_from_options(opts, self.motion),
         )
 

@@ -243,3 +243,22 @@ def test_pose_conversion_round_trip():
     assert np.allclose(pose_to_matrix(matrix_to_pose(T)), T)
     with pytest.raises(InvalidInputError, match="NaN"):
         pose_to_matrix(common_pb2.Pose(x=math.nan, qw=1.0))
+
+
+async def test_moves_are_planned_below_the_workspace_top(stub, kin, settings):
+    """A joint move that straightens the arm on the straight line puts the tool above the workspace's top,
+    which the driver refuses: the service plans it below (the top stands in its scenes as a box)."""
+    start = np.radians([180.0, 0.0, 90.0, 0.0, -90.0, 0.0])  # the safe home
+    goal = np.radians([131.0, -42.0, -144.0, -165.0, -71.0, -57.0])  # the elbow bent the other way
+    top = settings.robot.workspace.max[2]
+    line = [kin.fk(start + t * (goal - start))[2, 3] for t in np.linspace(0.0, 1.0, 41)]
+    assert max(line) > top  # the direct way would be refused
+    resp = await stub.PlanJoints(
+        motion_pb2.PlanJointsRequest(
+            start=start.tolist(), goal=goal.tolist(), options=motion_pb2.MotionOptions(planning_time_s=5.0)
+        )
+    )
+    assert resp.planner != "direct"
+    traj = JointTrajectory.from_proto(resp.trajectory)
+    assert np.allclose(traj.positions[-1], goal)
+    assert max(kin.fk(q)[2, 3] for q in traj.positions) <= top
