@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import asyncio
 import os
-import time
 
 import pytest
 from pickplace.v1 import task_pb2, vision_pb2
@@ -14,6 +13,7 @@ from services.common.keys import CellKeys
 from services.common.settings import Settings
 from services.sim.app import build_sim_server
 from services.sim.bus_link import SimBusLink
+from tests.polling import until
 
 pytestmark = pytest.mark.integration
 
@@ -65,22 +65,14 @@ async def test_periodic_frames_pause_while_a_cycle_runs(settings: Settings) -> N
         async with SimBusLink(s, server, bus, frame_rate=20.0) as link:
             status = asyncio.create_task(task_status(bus))
             try:
-                await _until(lambda: link.paused_periods >= 1, "the periodic frames to pause")
+                await until(lambda: link.paused_periods >= 1, "the periodic frames to pause")
                 assert link.camera is not None
                 rendered = link.camera._camera._seq  # the twin camera's frame count: none in flight now
-                await _until(lambda: rendered == 0 or rendered in seqs, "the last frame before the pause")
-                await _until(lambda: link.paused_periods >= 8, "more paused periods")
+                await until(lambda: rendered == 0 or rendered in seqs, "the last frame before the pause")
+                await until(lambda: link.paused_periods >= 8, "more paused periods")
                 assert link.camera._camera._seq == rendered  # nothing rendered while paused
                 bus.publish(keys.camera_frame_requests, b"")
-                await _until(lambda: rendered + 1 in seqs, "the frame asked for")  # a Detect's frame still is
+                await until(lambda: rendered + 1 in seqs, "the frame asked for")  # a Detect's frame still is
             finally:
                 status.cancel()
         sub.undeclare()
-
-
-async def _until(cond, what: str, timeout_s: float = 60.0) -> None:  # type: ignore[no-untyped-def]
-    deadline = time.monotonic() + timeout_s
-    while not cond():
-        if time.monotonic() > deadline:
-            pytest.fail(f"timed out after {timeout_s} s waiting for {what}")
-        await asyncio.sleep(0.01)

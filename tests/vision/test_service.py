@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import asyncio
 import sys
-import time
 import types
 
 import numpy as np
@@ -30,6 +29,7 @@ from services.vision.replay import ReplayCamera, record_frames
 from services.vision.service import VisionService, make_camera
 from services.vision.synthetic import NoiseModel, render_scene
 from services.vision.synthetic_scenes import random_scene
+from tests.polling import until
 
 pytestmark = pytest.mark.integration
 
@@ -52,6 +52,19 @@ class SceneCamera:
 
     def close(self) -> None:
         pass
+
+
+def _on_bus(settings, bus: Bus, scene_camera: SceneCamera, **kw) -> VisionService:  # type: ignore[no-untyped-def]
+    """A vision service that reads the Zenoh frame stream of ``scene_camera``'s scene."""
+    return VisionService(
+        settings,
+        bus,
+        None,
+        grpc_port=0,
+        metrics=CellMetrics(CollectorRegistry()),
+        T_base_camera=scene_camera.scene.T_base_camera,
+        **kw,
+    )
 
 
 def _vision_settings(settings, **camera):  # type: ignore[no-untyped-def]
@@ -119,14 +132,7 @@ async def test_publishes_detections_from_the_zenoh_frame_stream(settings):
     async with Bus(settings.zenoh) as bus:
         objects = bus.subscribe(keys.detected_objects, vision_pb2.DetectedObjects)
         images = bus.subscribe(keys.vision_debug_image, vision_pb2.DebugImage)
-        svc = VisionService(
-            settings,
-            bus,
-            None,
-            grpc_port=0,
-            metrics=CellMetrics(CollectorRegistry()),
-            T_base_camera=cam.scene.T_base_camera,
-        )
+        svc = _on_bus(settings, bus, cam)
         stop = asyncio.Event()
         async with svc:
             feeder = asyncio.create_task(publish_camera_frames(cam, bus, keys.camera_frames, 5.0, stop))
@@ -141,15 +147,6 @@ async def test_publishes_detections_from_the_zenoh_frame_stream(settings):
     assert svc.published >= 1
 
 
-async def _until(cond, what: str, timeout_s: float = 30.0) -> None:  # type: ignore[no-untyped-def]
-    """Poll ``cond`` until true; fail naming ``what`` after a deadline only a hung service reaches."""
-    deadline = time.monotonic() + timeout_s
-    while not cond():
-        if time.monotonic() > deadline:
-            pytest.fail(f"timed out after {timeout_s} s waiting for {what}")
-        await asyncio.sleep(0.01)
-
-
 async def test_a_detection_asks_the_frame_stream_for_its_frame(settings):
     """A stream that renders every 100 s (as the twin does at vision.rate_hz, to spare the CPU) gives
     the Detect call its frame at once: the call asks for one (CellKeys.camera_frame_requests)."""
@@ -161,20 +158,12 @@ async def test_a_detection_asks_the_frame_stream_for_its_frame(settings):
         requests = bus.subscribe_callback(
             keys.camera_frame_requests, lambda _k, _p: loop.call_soon_threadsafe(wanted.set)
         )
-        svc = VisionService(
-            settings,
-            bus,
-            None,
-            grpc_port=0,
-            metrics=CellMetrics(CollectorRegistry()),
-            T_base_camera=cam.scene.T_base_camera,
-            publish_loop=False,
-        )
+        svc = _on_bus(settings, bus, cam, publish_loop=False)
         async with svc, channel("127.0.0.1", svc.grpc_port) as ch:
             feeder = asyncio.create_task(
                 publish_camera_frames(cam, bus, keys.camera_frames, 0.01, stop, wanted)
             )
-            await _until(lambda: svc._bus_frame is not None, "the stream's first frame at the service")
+            await until(lambda: svc._bus_frame is not None, "the stream's first frame at the service")
             stub = vision_pb2_grpc.VisionStub(ch)
             reply = await stub.Detect(vision_pb2.DetectRequest(), timeout=30.0)
             stop.set()
@@ -209,15 +198,15 @@ async def test_the_live_loop_gives_way_to_a_running_cycle(settings):
         async with svc, channel("127.0.0.1", svc.grpc_port) as ch:
             status = asyncio.create_task(task_status(bus))
             try:
-                await _until(lambda: svc.paused_periods >= 1, "the loop to pause")
+                await until(lambda: svc.paused_periods >= 1, "the loop to pause")
                 published, captured = svc.published, cam.n
-                await _until(lambda: svc.paused_periods >= 6, "more paused periods")
+                await until(lambda: svc.paused_periods >= 6, "more paused periods")
                 assert (svc.published, cam.n) == (published, captured)  # nothing while paused
                 reply = await vision_pb2_grpc.VisionStub(ch).Detect(vision_pb2.DetectRequest(), timeout=30.0)
                 assert reply.objects.rod_detected
                 assert (svc.published, cam.n) == (published + 1, captured + 1)  # the cycle's own: published
                 active = False
-                await _until(lambda: svc.published >= published + 3, "the loop to go on")
+                await until(lambda: svc.published >= published + 3, "the loop to go on")
             finally:
                 status.cancel()
 
