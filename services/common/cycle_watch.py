@@ -1,6 +1,7 @@
-"""Whether the cell runs a pick cycle, from the task's status (pure): what shares the cell's CPU with it
-and can wait gives way (vision's live detection loop, the twin's periodic camera renders). They took
-the CPU the cycle's own detection and planning wait for."""
+"""Whether the cell runs a pick cycle, from the task's status: what shares the cell's CPU with it and can
+wait gives way (vision's live detection loop, the twin's periodic camera renders), which took the CPU the
+cycle's own detection and planning wait for. :class:`CycleWatch` decides (pure, given the time);
+:func:`follow_cycles` feeds it the task's status from the bus."""
 
 from __future__ import annotations
 
@@ -36,6 +37,10 @@ class CycleWatch:
 
     def active(self, now: float) -> bool:
         return self._active_at is not None and now - self._active_at <= self.stale_s
+
+    def gives_way(self, now: float, live_during_cycle: bool) -> bool:
+        """Whether periodic work pauses now (``vision.live_during_cycle`` keeps it going)."""
+        return not live_during_cycle and self.active(now)
 
 
 def follow_cycles(

@@ -163,7 +163,7 @@ class SimBusLink(ServiceShell):
         )
 
     def _frames_paused(self) -> bool:
-        paused = not self.settings.vision.live_during_cycle and self.cycle.active(time.monotonic())
+        paused = self.cycle.gives_way(time.monotonic(), self.settings.vision.live_during_cycle)
         self.paused_periods += paused
         return paused
 

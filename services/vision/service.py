@@ -288,7 +288,7 @@ class VisionService(GrpcShell):
         while True:
             period = 1.0 / self.settings.vision.rate_hz  # read each time: PUT /config may change it
             t0 = time.monotonic()
-            if self.cycle.active(t0) and not self.settings.vision.live_during_cycle:
+            if self.cycle.gives_way(t0, self.settings.vision.live_during_cycle):
                 self.paused_periods += 1  # the cycle's own detections are published meanwhile
                 await asyncio.sleep(period)
                 continue

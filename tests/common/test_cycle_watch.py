@@ -21,3 +21,11 @@ def test_a_task_fallen_silent_mid_cycle_does_not_pause_the_loop_for_good() -> No
     w.on_status(True, 10.0)
     assert w.active(13.0)
     assert not w.active(13.01)
+
+
+def test_live_during_cycle_keeps_periodic_work_going() -> None:
+    w = CycleWatch(stale_s=3.0)
+    w.on_status(True, 10.0)
+    assert w.gives_way(11.0, live_during_cycle=False)
+    assert not w.gives_way(11.0, live_during_cycle=True)
+    assert not w.gives_way(14.0, live_during_cycle=False)  # stale
