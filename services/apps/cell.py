@@ -113,7 +113,7 @@ class Cell:
         grasp = await self._stack.enter_async_context(GraspService(s, s.grpc.grasp_port))
         motion_port, grasp_port = motion.grpc_port, grasp.grpc_port
         await self._stack.enter_async_context(LiveConfig(self.bus, s, self._on_config))
-        camera = self._camera()
+        camera = await self._camera()
         self._stack.push_async_callback(self._close_camera)  # after the vision service has stopped
         self.vision = VisionService(
             s, self.bus, camera=camera, T_base_camera=self._calibration(s), publish_loop=True
@@ -230,7 +230,7 @@ class Cell:
         assert self.sim is not None
         return self.sim.controller.engine
 
-    def _camera(self):  # type: ignore[no-untyped-def]
+    async def _camera(self):  # type: ignore[no-untyped-def]
         if self.engine_name != "twin":
             return None
         if self.ur_sim is not None:
@@ -239,7 +239,7 @@ class Cell:
             return PipeCamera(self.ur_sim)
         from services.sim.twin.camera import TwinCamera
 
-        return TwinCamera(self.engine, seed=self.seed)
+        return await asyncio.to_thread(TwinCamera.ready, self.engine, self.seed)
 
     def _calibration(self, s: Settings) -> np.ndarray | None:
         """None = the vision service loads its calibration file (the default). The twin's true
@@ -277,7 +277,7 @@ class Cell:
 
         async def swap_camera(engine: TwinEngine) -> None:
             old_cam = vision.camera
-            vision.camera = TwinCamera(engine, seed=seed)
+            vision.camera = await asyncio.to_thread(TwinCamera.ready, engine, seed)
             if old_cam is not None:
                 await asyncio.to_thread(old_cam.close)
 

@@ -123,7 +123,7 @@ class SimBusLink(ServiceShell):
                 raise InvalidInputError(
                     f"camera frames need the twin engine, this sim runs {type(engine).__name__}"
                 )
-            cam = await asyncio.to_thread(TwinCamera, engine, self.seed)
+            cam = await asyncio.to_thread(TwinCamera.ready, engine, self.seed)
             self.camera = CurrentCamera(cam)
             stack.push_async_callback(asyncio.to_thread, self.camera.close)
             # a detection the task waits for asks for its frame: rendered at once, not at the next
@@ -208,7 +208,7 @@ class SimBusLink(ServiceShell):
 
         async def swap_camera(engine: TwinEngine) -> None:
             if self.camera is not None:
-                cam = await asyncio.to_thread(TwinCamera, engine, seed)
+                cam = await asyncio.to_thread(TwinCamera.ready, engine, seed)
                 old_cam = self.camera.swap(cam)
                 await asyncio.to_thread(old_cam.close)
 

@@ -137,6 +137,8 @@ class VisionService(GrpcShell):
         self.latest_result: DetectionResult | None = None
         self.published = 0
         self.paused_periods = 0  # live-loop periods given to a running cycle
+        self.dropped_frames = 0  # live-loop frames not detected: a cycle started or asked meanwhile
+        self._asked = 0  # Detect calls in progress: someone waits for them, the live loop does not
         self._bus_frame: RGBDFrame | None = None
         self._bus_frame_event = asyncio.Event()
         self._subscription: Any = None
@@ -236,11 +238,22 @@ class VisionService(GrpcShell):
 
     # --- detection -----------------------------------------------------------------------------------
     async def detect_once(
-        self, frame: RGBDFrame | None = None, prompt: bool = False
+        self, frame: RGBDFrame | None = None, prompt: bool = False, capture_s: float = 0.0
     ) -> tuple[DetectionResult, RGBDFrame]:
         """Detect on ``frame`` (or the newest one), record metrics, publish, refresh the overlay.
-        ``prompt``: someone waits for it: a frame stream that takes requests is asked for a frame now."""
-        capture_s = 0.0
+        ``prompt``: someone waits for it: a frame stream that takes requests is asked for a frame now,
+        and the live loop leaves the CPU to it meanwhile."""
+        if not prompt:
+            return await self._detect(frame, prompt, capture_s)
+        self._asked += 1
+        try:
+            return await self._detect(frame, prompt, capture_s)
+        finally:
+            self._asked -= 1
+
+    async def _detect(
+        self, frame: RGBDFrame | None, prompt: bool, capture_s: float
+    ) -> tuple[DetectionResult, RGBDFrame]:
         if frame is None:
             frame, capture_s = await self._next_frame(prompt)
         async with self._detect_lock:  # one CPU-bound detection at a time, off the event loop
@@ -283,17 +296,28 @@ class VisionService(GrpcShell):
         except Exception as exc:  # the bus must never break detection
             log.warning("zenoh publish failed: %s", exc)
 
+    def _live_gives_way(self, now: float) -> bool:
+        """Whether the live loop leaves the CPU to a cycle: one is under way (as the task says), or a
+        Detect call waits (the task's own status may still be on its way)."""
+        return self._asked > 0 or self.cycle.gives_way(now, self.settings.vision.live_during_cycle)
+
     async def _run(self) -> None:
         failures = 0
         while True:
             period = 1.0 / self.settings.vision.rate_hz  # read each time: PUT /config may change it
             t0 = time.monotonic()
-            if self.cycle.gives_way(t0, self.settings.vision.live_during_cycle):
+            if self._live_gives_way(t0):
                 self.paused_periods += 1  # the cycle's own detections are published meanwhile
                 await asyncio.sleep(period)
                 continue
             try:
-                await self.detect_once()
+                frame, capture_s = await self._next_frame()
+                if self._live_gives_way(time.monotonic()):
+                    # a cycle began while this frame was taken: its own detection goes first (a
+                    # detection beside it took the CPU its DETECT waits for)
+                    self.dropped_frames += 1
+                else:
+                    await self.detect_once(frame, capture_s=capture_s)
                 failures = 0
             except VisionError as exc:
                 failures += 1

@@ -134,6 +134,20 @@ def test_same_seed_gives_identical_scene_and_frames(engine: TwinEngine, noisy_ca
     assert different.scene != engine.scene
 
 
+def test_a_ready_camera_has_its_renderer_and_takes_the_same_frames(engine: TwinEngine) -> None:
+    """``ready`` sets the renderer up before anyone waits for a frame, and takes none: its first frame
+    is the first a camera of that seed takes (same noise, seq 1)."""
+    ready, fresh = TwinCamera.ready(engine, seed=42), TwinCamera(engine, seed=42)
+    try:
+        assert ready._renderer is not None and fresh._renderer is None
+        fr, ff = ready.capture(), fresh.capture()
+        assert fr.seq == ff.seq == 1
+        assert np.array_equal(fr.color, ff.color) and np.array_equal(fr.depth, ff.depth)
+    finally:
+        ready.close()
+        fresh.close()
+
+
 def test_closed_camera_raises(engine: TwinEngine) -> None:
     cam = TwinCamera(engine, seed=0, noise=False)
     cam.close()

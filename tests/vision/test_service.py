@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import asyncio
 import sys
+import threading
+import time
 import types
 
 import numpy as np
@@ -209,6 +211,56 @@ async def test_the_live_loop_gives_way_to_a_running_cycle(settings):
                 await until(lambda: svc.published >= published + 3, "the loop to go on")
             finally:
                 status.cancel()
+
+
+class _LiveFrameDuringDetect(SceneCamera):
+    """The live loop's frame arrives while a Detect call is under way: its capture returns only once the
+    call's own capture began, and the call's waits until the loop has dealt with that frame."""
+
+    def __init__(self, seed: int):
+        super().__init__(seed)
+        self.svc: VisionService | None = None
+        self.live_waiting = threading.Event()
+        self.asked = threading.Event()
+        self.calls = 0
+
+    def capture(self):  # type: ignore[no-untyped-def]
+        self.calls += 1
+        if self.calls == 1:  # the live loop's
+            self.live_waiting.set()
+            assert self.asked.wait(10.0)
+        elif self.calls == 2:  # the Detect call's
+            self.asked.set()
+            svc = self.svc
+            assert svc is not None
+            deadline = time.monotonic() + 10.0  # a thread of the camera: no event loop here
+            while svc.dropped_frames == 0 and svc.published == 0 and time.monotonic() < deadline:
+                time.sleep(0.005)
+        return super().capture()
+
+
+async def test_a_live_frame_taken_while_a_detect_call_waits_is_not_detected(settings):
+    """The task's DETECT does not share the CPU with a detection of the live loop: a frame the loop took
+    while a Detect call was under way is dropped (the call's own detection is published instead)."""
+    cam = _LiveFrameDuringDetect(36)
+    s = settings.model_copy(update={"vision": settings.vision.model_copy(update={"rate_hz": 20.0})})
+    async with Bus(s.zenoh) as bus:
+        svc = VisionService(
+            s,
+            bus,
+            cam,
+            grpc_port=0,
+            metrics=CellMetrics(CollectorRegistry()),
+            T_base_camera=cam.scene.T_base_camera,
+        )
+        cam.svc = svc
+        async with svc, channel("127.0.0.1", svc.grpc_port) as ch:
+            await until(cam.live_waiting.is_set, "the live loop to take a frame")
+            reply = await vision_pb2_grpc.VisionStub(ch).Detect(vision_pb2.DetectRequest(), timeout=30.0)
+            assert reply.objects.rod_detected
+            assert svc.dropped_frames == 1
+            assert svc.published == 1  # the Detect call's, not the loop's
+            await until(lambda: svc.published >= 2, "the loop to go on")  # nothing else holds it back
 
 
 async def test_without_a_frame_source_detect_says_so(settings):

@@ -27,7 +27,7 @@ class TwinHost:
         self.model = model
         self.seed = seed
         self.engine: TwinEngine = create_ur_twin_engine(settings, model, seed)
-        self.camera = TwinCamera(self.engine, seed=seed)
+        self.camera = TwinCamera.ready(self.engine, seed)
         self.truth = EngineTruth(lambda: self.engine)
         self._lock = asyncio.Lock()
 
@@ -50,7 +50,7 @@ class TwinHost:
             new.set_digital_outputs(controller.engine_digital_outputs)
             controller.engine = new
             self.engine, self.seed = new, seed
-            self.camera = TwinCamera(new, seed=seed)
+            self.camera = await asyncio.to_thread(TwinCamera.ready, new, seed)
         await asyncio.to_thread(old_camera.close)
         await asyncio.to_thread(old.close)
         log.info("UR twin: scene of seed %d", seed)
