@@ -6,10 +6,13 @@ from services.kinematics.trajectory import JointTrajectory
 from services.task.ports import GripOutcome, MoveOutcome, RobotPort
 from services.task.states import PickOutcome
 
+SAME_POINT_RAD = 1e-3  # a move starting this near the last recorded point starts there (tracking error)
+
 
 class RecordingRobot:
     """The robot port, recording on the outcome what the cycle executed: the joint waypoints the arm
-    went through (each motion's start and where it ended) and the gripper actions."""
+    went through (each motion's start and its end, or where a guarded one stopped) and the gripper
+    actions."""
 
     def __init__(self, robot: RobotPort, out: PickOutcome):
         self._robot, self._out = robot, out
@@ -21,9 +24,12 @@ class RecordingRobot:
         res: MoveOutcome = await self._robot.execute(traj, *args, **kwargs)  # type: ignore[arg-type]
         wps = self._out.executed_waypoints
         start = [float(v) for v in traj.positions[0]]
-        if not wps or max(abs(a - b) for a, b in zip(wps[-1], start, strict=True)) > 1e-6:
+        if not wps or max(abs(a - b) for a, b in zip(wps[-1], start, strict=True)) > SAME_POINT_RAD:
             wps.append(start)
-        wps.append([float(v) for v in res.final_q])
+        # a move that ran to its end went through its planned end (one that flows on returns while the arm
+        # is still on its way, anywhere on it); one cut short ended where it stopped
+        end = res.final_q if res.stopped_early else traj.positions[-1]
+        wps.append([float(v) for v in end])
         return res
 
     async def gripper(self, close: bool) -> GripOutcome:

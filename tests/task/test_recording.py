@@ -1,0 +1,50 @@
+"""What a cycle executed, as the eval's bound reads it: the plan's joint waypoints, not where the arm
+happened to be when a call that flows on returned."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from services.task.ports import GripOutcome, MoveOutcome
+from services.task.recording import RecordingRobot
+from services.task.states import PickOutcome
+from tests.task.fakes import line
+
+
+class _Arm:
+    """Answers each execute with the outcome it is given, in order."""
+
+    def __init__(self, *outcomes: MoveOutcome):
+        self.outcomes = list(outcomes)
+
+    async def execute(self, traj, force_guard_n: float = 0.0, continues: bool = False) -> MoveOutcome:  # type: ignore[no-untyped-def]
+        return self.outcomes.pop(0)
+
+    async def gripper(self, close: bool) -> GripOutcome:
+        return GripOutcome(closed=close, object_detected=None)
+
+
+def _q(*v: float) -> np.ndarray:
+    return np.array([*v, 0.0, 0.0, 0.0])
+
+
+async def test_flowing_moves_record_their_planned_ends_and_a_guarded_stop_where_it_stopped():
+    a, b, c, d = _q(0, 0, 0), _q(0.5, 0, 0), _q(0.5, 0.4, 0), _q(0.5, 0.4, -0.3)
+    mid_flow = _q(0.31, 0, 0)  # the arm when the flowing move's call returned: on its way to b
+    at_c = c + 2e-4  # at rest at c, within the tracking error
+    stopped = _q(0.5, 0.4, -0.21)  # the touch-down felt the contact before d
+    out = PickOutcome(pick_id="p", task="stand-rod", object_class="rod")
+    arm = _Arm(
+        MoveOutcome(mid_flow, 0.3),
+        MoveOutcome(at_c, 0.5),
+        MoveOutcome(stopped, 0.4, stopped_early=True),
+        MoveOutcome(a + 1e-4, 0.6),
+    )
+    robot = RecordingRobot(arm, out)  # type: ignore[arg-type]
+    await robot.execute(line(a, b), continues=True)
+    await robot.execute(line(b, c))
+    await robot.gripper(True)
+    await robot.execute(line(at_c, d), 0.6)  # planned from where the arm stood
+    await robot.execute(line(stopped, a))
+    assert np.allclose(out.executed_waypoints, [a, b, c, stopped, a])
+    assert out.gripper_actions == 1
