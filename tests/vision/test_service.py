@@ -56,12 +56,13 @@ class SceneCamera:
         pass
 
 
-def _on_bus(settings, bus: Bus, scene_camera: SceneCamera, **kw) -> VisionService:  # type: ignore[no-untyped-def]
-    """A vision service that reads the Zenoh frame stream of ``scene_camera``'s scene."""
+def _service(settings, bus: Bus, scene_camera: SceneCamera, own_camera: bool = False, **kw) -> VisionService:  # type: ignore[no-untyped-def]
+    """A vision service on ``scene_camera``'s scene: reading that camera itself (``own_camera``), else
+    the Zenoh frame stream of it."""
     return VisionService(
         settings,
         bus,
-        None,
+        scene_camera if own_camera else None,
         grpc_port=0,
         metrics=CellMetrics(CollectorRegistry()),
         T_base_camera=scene_camera.scene.T_base_camera,
@@ -134,7 +135,7 @@ async def test_publishes_detections_from_the_zenoh_frame_stream(settings):
     async with Bus(settings.zenoh) as bus:
         objects = bus.subscribe(keys.detected_objects, vision_pb2.DetectedObjects)
         images = bus.subscribe(keys.vision_debug_image, vision_pb2.DebugImage)
-        svc = _on_bus(settings, bus, cam)
+        svc = _service(settings, bus, cam)
         stop = asyncio.Event()
         async with svc:
             feeder = asyncio.create_task(publish_camera_frames(cam, bus, keys.camera_frames, 5.0, stop))
@@ -160,7 +161,7 @@ async def test_a_detection_asks_the_frame_stream_for_its_frame(settings):
         requests = bus.subscribe_callback(
             keys.camera_frame_requests, lambda _k, _p: loop.call_soon_threadsafe(wanted.set)
         )
-        svc = _on_bus(settings, bus, cam, publish_loop=False)
+        svc = _service(settings, bus, cam, publish_loop=False)
         async with svc, channel("127.0.0.1", svc.grpc_port) as ch:
             feeder = asyncio.create_task(
                 publish_camera_frames(cam, bus, keys.camera_frames, 0.01, stop, wanted)
@@ -189,14 +190,7 @@ async def test_the_live_loop_gives_way_to_a_running_cycle(settings):
             await asyncio.sleep(0.1)
 
     async with Bus(s.zenoh) as bus:
-        svc = VisionService(
-            s,
-            bus,
-            cam,
-            grpc_port=0,
-            metrics=CellMetrics(CollectorRegistry()),
-            T_base_camera=cam.scene.T_base_camera,
-        )
+        svc = _service(s, bus, cam, own_camera=True)
         async with svc, channel("127.0.0.1", svc.grpc_port) as ch:
             status = asyncio.create_task(task_status(bus))
             try:
@@ -245,14 +239,7 @@ async def test_a_live_frame_taken_while_a_detect_call_waits_is_not_detected(sett
     cam = _LiveFrameDuringDetect(36)
     s = settings.model_copy(update={"vision": settings.vision.model_copy(update={"rate_hz": 20.0})})
     async with Bus(s.zenoh) as bus:
-        svc = VisionService(
-            s,
-            bus,
-            cam,
-            grpc_port=0,
-            metrics=CellMetrics(CollectorRegistry()),
-            T_base_camera=cam.scene.T_base_camera,
-        )
+        svc = _service(s, bus, cam, own_camera=True)
         cam.svc = svc
         async with svc, channel("127.0.0.1", svc.grpc_port) as ch:
             await until(cam.live_waiting.is_set, "the live loop to take a frame")
