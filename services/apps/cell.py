@@ -70,12 +70,14 @@ class Cell:
         seed: int | None = None,
         perfect_calibration: bool = False,
         calibration_error: tuple[float, float] | None = None,
+        live_vision: bool = True,
     ):
         self.settings = settings
         self.engine_name = engine
         self.seed = settings.sim.seed if seed is None else seed
         self.perfect_calibration = perfect_calibration
         self.calibration_error = calibration_error  # (metres, degrees) injected into T_base_camera
+        self.live_vision = live_vision  # vision's live loop (the dashboard's frames between cycles)
         self.sim: SimDobotServer | None = None  # the simulated Nova5 ...
         self.ur_sim: URSimProcess | None = None  # ... or the simulated UR (robot.model ur5e | ur3)
         self.truth: TwinTruth | None = None  # the twin's ground truth (twin engine only)
@@ -116,7 +118,7 @@ class Cell:
         camera = await self._camera()
         self._stack.push_async_callback(self._close_camera)  # after the vision service has stopped
         self.vision = VisionService(
-            s, self.bus, camera=camera, T_base_camera=self._calibration(s), publish_loop=True
+            s, self.bus, camera=camera, T_base_camera=self._calibration(s), publish_loop=self.live_vision
         )
         await self._stack.enter_async_context(self.vision)
         s = with_updates(

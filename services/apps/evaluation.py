@@ -265,8 +265,16 @@ async def run_eval(
     # for one a crash had cut)
     with tempfile.TemporaryDirectory(prefix="pickplace-eval-") as state_dir, busy_processes(load):
         s = s.model_copy(update={"state": s.state.model_copy(update={"dir": state_dir})})
+        # no live vision loop: the trials follow each other as `pickplace up`'s cycles do, and there the
+        # loop pauses from the first cycle to the last. Between trials (the judge's settle, the next
+        # world) it took frames a continuous run does not: a capture still in flight held up the next
+        # DETECT, and the frames it took decided which noise that DETECT's picture got
         async with Cell(
-            s, seed=seed, perfect_calibration=calibrated, calibration_error=calibration_error
+            s,
+            seed=seed,
+            perfect_calibration=calibrated,
+            calibration_error=calibration_error,
+            live_vision=False,
         ) as cell:
             sim_t0 = cell.sim_time()
             await trial.run_all(cell, report, trials, seed, console, progress, journal)

@@ -72,11 +72,10 @@ async def test_a_seeds_outcome_and_plan_do_not_depend_on_the_cpu_load(tmp_path):
             q.error_code,
         ), (q.failure_reason, ld.failure_reason)
         assert q.harness_error == ld.harness_error == ""
-        # the same grasp on the same IK branch (another would differ by tens of degrees): up to the lift
-        # the plan moves by what a picture's noise moves the rod's estimate, a degree at most (how
-        # many frames the live loop took before DETECT decides which noise that picture got)
+        # the same picture, so the same grasp and plan: up to the lift (before any contact) the same
+        # joints to a tenth of a degree
         qw, lw = np.asarray(q.executed_waypoints), np.asarray(ld.executed_waypoints)
-        assert np.allclose(lw[:4], qw[:4], atol=0.035) and np.allclose(lw[-1], qw[-1], atol=1e-3)
+        assert np.allclose(lw[:4], qw[:4], atol=2e-3) and np.allclose(lw[-1], qw[-1], atol=1e-3)
         # and the same motion in all: where a guarded move felt its contact varies by a millimetre
         assert ld.bound_motion_s == pytest.approx(q.bound_motion_s, rel=0.03)
     assert quiet.successes == 2  # seeds 1000 and 1001 stand (200/200 from seed 1000 in `pickplace eval`)
