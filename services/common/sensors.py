@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 import numpy as np
 from pickplace.v1 import common_pb2, vision_pb2
 
+from services.common.aio import first_of
 from services.common.errors import InvalidFrameError, InvalidInputError
 
 if TYPE_CHECKING:
@@ -171,18 +172,8 @@ async def publish_camera_frames(
             n += 1
         with contextlib.suppress(TimeoutError):
             async with asyncio.timeout(max(0.0, period - (time.monotonic() - t0))):
-                await _first_of(stop, wanted)
+                await first_of(stop, wanted)
     return n
-
-
-async def _first_of(*events: asyncio.Event | None) -> None:
-    """Until any of ``events`` is set."""
-    waits = [asyncio.ensure_future(e.wait()) for e in events if e is not None]
-    try:
-        await asyncio.wait(waits, return_when=asyncio.FIRST_COMPLETED)
-    finally:
-        for w in waits:
-            w.cancel()
 
 
 def write_intrinsics(directory: Path, intr: CameraIntrinsics, depth_scale: float) -> Path:

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from services.kinematics.trajectory import JointTrajectory
+from services.task.pick_planning import near
 from services.task.ports import GripOutcome, MoveOutcome, RobotPort
 from services.task.states import PickOutcome
-
-SAME_POINT_RAD = 1e-3  # a move starting this near the last recorded point starts there (tracking error)
 
 
 class RecordingRobot:
@@ -23,9 +24,9 @@ class RecordingRobot:
     async def execute(self, traj: JointTrajectory, *args: object, **kwargs: object) -> MoveOutcome:
         res: MoveOutcome = await self._robot.execute(traj, *args, **kwargs)  # type: ignore[arg-type]
         wps = self._out.executed_waypoints
-        start = [float(v) for v in traj.positions[0]]
-        if not wps or max(abs(a - b) for a, b in zip(wps[-1], start, strict=True)) > SAME_POINT_RAD:
-            wps.append(start)
+        start = traj.positions[0]
+        if not wps or not near(np.asarray(wps[-1]), start):  # within the tracking error: the same point
+            wps.append([float(v) for v in start])
         # a move that ran to its end went through its planned end (one that flows on returns while the arm
         # is still on its way, anywhere on it); one cut short ended where it stopped
         end = res.final_q if res.stopped_early else traj.positions[-1]

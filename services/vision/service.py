@@ -243,24 +243,17 @@ class VisionService(GrpcShell):
         """Detect on ``frame`` (or the newest one), record metrics, publish, refresh the overlay.
         ``prompt``: someone waits for it: a frame stream that takes requests is asked for a frame now,
         and the live loop leaves the CPU to it meanwhile."""
-        if not prompt:
-            return await self._detect(frame, prompt, capture_s)
-        self._asked += 1
+        self._asked += prompt
         try:
-            return await self._detect(frame, prompt, capture_s)
+            if frame is None:
+                frame, capture_s = await self._next_frame(prompt)
+            async with self._detect_lock:  # one CPU-bound detection at a time, off the event loop
+                result = await asyncio.to_thread(self.pipeline.detect, frame, self.T_base_camera)
+                jpeg = await asyncio.to_thread(
+                    overlay_jpeg, frame.color, result, self.settings.vision.debug_jpeg_quality
+                )
         finally:
-            self._asked -= 1
-
-    async def _detect(
-        self, frame: RGBDFrame | None, prompt: bool, capture_s: float
-    ) -> tuple[DetectionResult, RGBDFrame]:
-        if frame is None:
-            frame, capture_s = await self._next_frame(prompt)
-        async with self._detect_lock:  # one CPU-bound detection at a time, off the event loop
-            result = await asyncio.to_thread(self.pipeline.detect, frame, self.T_base_camera)
-            jpeg = await asyncio.to_thread(
-                overlay_jpeg, frame.color, result, self.settings.vision.debug_jpeg_quality
-            )
+            self._asked -= prompt
         result = replace_timings(result, capture=capture_s * 1e3)
         self._observe(result)
         self.latest_result = result
