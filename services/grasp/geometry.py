@@ -103,6 +103,34 @@ def _rotations_about(axis: Array, angles: Array) -> Array:
     return np.eye(3)[None] + s * K[None] + (1.0 - c) * (K @ K)[None]
 
 
+def pose_paths(T_a: Array, T_b: Array, n: int) -> Array:
+    """:func:`pose_path` with ``n`` steps for B pairs of poses at once: (B, 4, 4) × 2 → (B, n + 1, 4, 4)."""
+    T_a, T_b = np.asarray(T_a, dtype=float), np.asarray(T_b, dtype=float)
+    s = np.linspace(0.0, 1.0, n + 1)
+    out = np.repeat(T_a[:, None], n + 1, axis=1)
+    out[:, :, :3, 3] = T_a[:, None, :3, 3] + s[None, :, None] * (T_b[:, None, :3, 3] - T_a[:, None, :3, 3])
+    R_rel = np.swapaxes(T_a[:, :3, :3], -1, -2) @ T_b[:, :3, :3]
+    trace = np.trace(R_rel, axis1=-2, axis2=-1)
+    angle = np.arccos(np.clip((trace - 1.0) / 2.0, -1.0, 1.0))
+    w = np.stack(
+        [R_rel[:, 2, 1] - R_rel[:, 1, 2], R_rel[:, 0, 2] - R_rel[:, 2, 0], R_rel[:, 1, 0] - R_rel[:, 0, 1]],
+        axis=-1,
+    )
+    turning = angle >= 1e-9
+    axis = np.where(turning[:, None], w / np.where(turning, 2.0 * np.sin(angle), 1.0)[:, None], UP)
+    K = np.zeros((len(axis), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -axis[:, 2], axis[:, 1], -axis[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = axis[:, 2], -axis[:, 1], axis[:, 0]
+    phi = s[None, :] * np.where(turning, angle, 0.0)[:, None]  # (B, n + 1)
+    sin, cos = np.sin(phi)[..., None, None], np.cos(phi)[..., None, None]
+    R = np.eye(3) + sin * K[:, None] + (1.0 - cos) * (K @ K)[:, None]
+    out[:, :, :3, :3] = T_a[:, None, :3, :3] @ R
+    out[:, -1, :3, :3] = T_b[:, :3, :3]
+    for b in np.nonzero(trace <= -1.0 + HALF_TURN_MARGIN)[0]:  # the way round is scipy's choice there
+        out[b] = pose_path(T_a[b], T_b[b], 1.0, n)
+    return out
+
+
 def pose_path(T_a: Array, T_b: Array, step_m: float, n: int | None = None) -> Array:
     """Tool poses (n + 1, 4, 4) on the straight line a → b (position lerp, orientation slerp), both ends
     included; ``n`` steps, or as keep each step ≤ ``step_m``."""

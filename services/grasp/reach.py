@@ -11,12 +11,13 @@ once — grasp options are compared by running them side by side.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from services.common.errors import IKFailureError
-from services.kinematics.analytic import dh_matrices, ik_all
+from services.kinematics.analytic import ik_all
 from services.kinematics.robot_models import RobotSpec
 
 Array = np.ndarray
@@ -57,15 +58,25 @@ def check_reach(spec: RobotSpec, p: Array, what: str) -> None:
         )
 
 
-def frame_origins(spec: RobotSpec, q: Array) -> Array:
-    """Origins of joint frames 1..6 for joints (..., 6) → (..., 6, 3), batched."""
+def origin_heights(spec: RobotSpec, q: Array) -> Array:
+    """Heights (base z) of the origins of joint frames 1..6 for joints (..., 6) → (..., 6), batched.
+
+    Only the base's z row is carried through the DH chain (z_row @ A_1 @ ... @ A_i, in closed form
+    per joint): a quarter of the work of the full transforms, for every sample of every track."""
     theta = np.asarray(q, dtype=float) + spec.theta_offset
-    T = dh_matrices(spec, theta[..., 0], 0)
-    out = [T[..., :3, 3]]
-    for i in range(1, spec.dof):
-        T = T @ dh_matrices(spec, theta[..., i], i)
-        out.append(T[..., :3, 3])
-    return np.stack(out, axis=-2)
+    r0 = np.zeros(theta.shape[:-1])
+    r1 = np.zeros(theta.shape[:-1])
+    r2 = np.ones(theta.shape[:-1])
+    r3 = np.zeros(theta.shape[:-1])
+    out = []
+    for i in range(spec.dof):
+        ct, st = np.cos(theta[..., i]), np.sin(theta[..., i])
+        ca, sa, a, d = math.cos(spec.alpha[i]), math.sin(spec.alpha[i]), spec.a[i], spec.d[i]
+        u = r0 * ct + r1 * st  # the row against the joint's rotated x and y axes
+        v = r1 * ct - r0 * st
+        r0, r1, r2, r3 = u, v * ca + r2 * sa, r2 * ca - v * sa, a * u + d * r2 + r3
+        out.append(r3)
+    return np.stack(out, axis=-1)
 
 
 def singularity_margin(spec: RobotSpec, q: Array) -> Array:
@@ -155,7 +166,7 @@ def track_paths(
 
     # table clearance of the elbow and wrist joints (frames 3..6) along each surviving track (only
     # those: forward kinematics of every dead track was most of the planning time)
-    low = frame_origins(spec, path[ix])[..., 2:, 2].min(axis=(-1, -2)) if ix.size else np.empty(0)
+    low = origin_heights(spec, path[ix])[..., 2:].min(axis=(-1, -2)) if ix.size else np.empty(0)
     near_table = low < limits.table_z_m + limits.arm_table_clearance_m
     singular = margin < limits.min_singularity_sin
     good = ~near_table & ~singular

@@ -44,7 +44,7 @@ from services.common.frames import finite_vector, invert_transform
 from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.common.settings import GraspSettings
 from services.grasp.force_closure import evaluate_force_closure
-from services.grasp.geometry import cylinder_lowest_z, lowest_gripper_z, pose, pose_path, tool_rotation, unit
+from services.grasp.geometry import cylinder_lowest_z, lowest_gripper_z, pose, pose_paths, tool_rotation, unit
 from services.grasp.plan import Grasp, Guard, HeldObject, PickPlan, Waypoint
 from services.grasp.reach import check_reach, track_paths
 from services.grasp.synthesis import CollisionCheck, contact_model, track_limits, width_quality
@@ -359,24 +359,31 @@ def _build_options(
     }
     floor_rod = table + rc.turn_clearance_m
     floor_gripper = table + g.table_clearance_m
-    for o in options:
-        if o.reason:
-            continue
-        pieces, names, key_index = [o.poses["PRE_GRASP"][None]], ["PRE_GRASP"], {"PRE_GRASP": 0}
-        for (a, b), n in counts.items():
-            seg = pose_path(o.poses[a], o.poses[b], step, n)[1:]
-            names += [f"{b} ({k + 1}/{n} of the way from {a})" for k in range(n - 1)] + [b]
-            pieces.append(seg)
-            key_index[b] = len(names) - 1
-        o.path = np.vstack(pieces)
-        o.names = names
-        o.key_index = key_index
-        # the carried rod, lengthened by the grasp tolerance at both ends: clear of the table by
-        # turn_clearance_m during the turn and by PLACE_MARGIN_M on the way down to the guard's start
-        i0, i1, i2 = key_index["LIFT"], key_index["REORIENT"], key_index["PLACE_ABOVE"]
-        held_T = o.path[i0 : i2 + 1] @ o.held.T_tool_object
-        low = cylinder_lowest_z(held_T[:, :3, 3], held_T[:, :3, 2], r, rod.length + 2 * rc.offset_tolerance_m)
-        floor = np.where(np.arange(i0, i2 + 1) <= i1, floor_rod, table + PLACE_MARGIN_M)
+    names, key_index = ["PRE_GRASP"], {"PRE_GRASP": 0}
+    for (a, b), n in counts.items():
+        names += [f"{b} ({k + 1}/{n} of the way from {a})" for k in range(n - 1)] + [b]
+        key_index[b] = len(names) - 1
+    live = [o for o in options if not o.reason]
+    if not live:
+        return options
+    # every live option's path at once (the same samples per segment for all of them)
+    pieces = [np.stack([o.poses["PRE_GRASP"] for o in live])[:, None]]
+    for (a, b), n in counts.items():
+        T_a, T_b = np.stack([o.poses[a] for o in live]), np.stack([o.poses[b] for o in live])
+        pieces.append(pose_paths(T_a, T_b, n)[:, 1:])
+    paths = np.concatenate(pieces, axis=1)
+    # the carried rod, lengthened by the grasp tolerance at both ends: clear of the table by
+    # turn_clearance_m during the turn and by PLACE_MARGIN_M on the way down to the guard's start
+    i0, i1, i2 = key_index["LIFT"], key_index["REORIENT"], key_index["PLACE_ABOVE"]
+    held_T = paths[:, i0 : i2 + 1] @ np.stack([o.held.T_tool_object for o in live])[:, None]
+    lows = cylinder_lowest_z(
+        held_T[..., :3, 3], held_T[..., :3, 2], r, rod.length + 2 * rc.offset_tolerance_m
+    )
+    floor = np.where(np.arange(i0, i2 + 1) <= i1, floor_rod, table + PLACE_MARGIN_M)
+    z_grips = lowest_gripper_z(g, paths, opening)
+    for j, o in enumerate(live):
+        o.path, o.names, o.key_index = paths[j], names, key_index
+        low = lows[j]
         o.min_rod_z = float(low[: i1 - i0 + 1].min())
         if np.any(low < floor):
             k = int(np.argmin(low - floor))
@@ -386,7 +393,7 @@ def _build_options(
                 f"(need {(floor[k] - table) * 1000:.0f} mm) at {names[k + i0]}"
             )
             continue
-        z_grip = lowest_gripper_z(g, o.path, opening)
+        z_grip = z_grips[j]
         if z_grip.min() < floor_gripper - 1e-9:
             k = int(np.argmin(z_grip))
             o.reason, o.kind = f"the fingers would touch the table at {names[k]}", "clearance"

@@ -124,6 +124,16 @@ class Waypoint:
             raise InvalidInputError(f"waypoint motion must be 'joint' or 'linear', got {self.motion!r}")
 
 
+@dataclass(frozen=True)
+class PathPlan:
+    """A checked joint path before timing (a blended run times its parts' paths together)."""
+
+    path: Array  # the geometric joint waypoints, collision-checked
+    planner: str  # "direct", "cartesian" or an OMPL planner name
+    method: str  # how it is timed on its own (see services.motion.timing)
+    planning_time_s: float
+
+
 @dataclass
 class Plan:
     trajectory: JointTrajectory
@@ -177,6 +187,10 @@ class MotionPlanner:
         ``shortest_angle``: move full-turn joints to the goal's equivalent nearest the start
         (only where the joint's limits allow it).
         """
+        return self.timed(self.joints_path(start, goal, shortest_angle=shortest_angle))
+
+    def joints_path(self, start: ArrayLike, goal: ArrayLike, *, shortest_angle: bool = False) -> PathPlan:
+        """The checked joint path of :meth:`plan_joints`, not yet timed."""
         t0 = time.perf_counter()
         deadline = t0 + self.config.time_budget_s
         q0 = self._valid_state(start, "start")
@@ -185,26 +199,41 @@ class MotionPlanner:
             q1 = wrap_toward(q0, q1, self.limits.lower, self.limits.upper)
         self._require_free(q1, "goal")
         path, how = self._joint_path(q0, q1, deadline)
-        return self._finish(path, how, t0)
+        return PathPlan(path, how, self.config.timing, time.perf_counter() - t0)
 
     def plan_to_pose(self, start: ArrayLike, T_base_tool: ArrayLike) -> Plan:
         """Collision-free timed motion to a tool pose (joint-space move to an IK solution).
 
         IK solutions are tried nearest-to-start first, skipping singular and colliding ones.
         """
+        return self.timed(self.path_to_pose(start, T_base_tool))
+
+    def path_to_pose(self, start: ArrayLike, T_base_tool: ArrayLike) -> PathPlan:
+        """The checked joint path of :meth:`plan_to_pose`, not yet timed."""
         t0 = time.perf_counter()
         deadline = t0 + self.config.time_budget_s
         q0 = self._valid_state(start, "start")
         goal = self.goal_for_pose(check_pose(T_base_tool, "target pose"), q0)
         path, how = self._joint_path(q0, goal, deadline)
-        return self._finish(path, how, t0)
+        return PathPlan(path, how, self.config.timing, time.perf_counter() - t0)
 
     def plan_cartesian(self, start: ArrayLike, targets: Sequence[ArrayLike]) -> Plan:
         """Straight tool lines from the start pose through ``targets`` (IK per step, jump check)."""
+        return self.timed(self.line_path(start, targets))
+
+    def line_path(self, start: ArrayLike, targets: Sequence[ArrayLike]) -> PathPlan:
+        """The checked joint path of :meth:`plan_cartesian`, not yet timed."""
         t0 = time.perf_counter()
         q0 = self._valid_state(start, "start")
         path = self._cartesian(q0, targets)
-        return self._finish(path, "cartesian", t0, method="toppra_dense")
+        return PathPlan(path, "cartesian", "toppra_dense", time.perf_counter() - t0)
+
+    def timed(self, p: PathPlan) -> Plan:
+        """A checked path timed as its planner would (a trajectory that is verified and collision-free)."""
+        notes: list[str] = []
+        t1 = time.perf_counter()
+        traj = self._timed(p.path, p.method, notes=notes)
+        return Plan(traj, p.path, p.planner, p.planning_time_s, time.perf_counter() - t1, notes)
 
     def plan_waypoints(self, start: ArrayLike, waypoints: Sequence[Waypoint]) -> Plan:
         """A sequence of joint-space and linear moves; the arm stops at every waypoint.
@@ -416,13 +445,6 @@ class MotionPlanner:
         traj = time_parameterize(path, self.limits, self.names, dt=c.knot_period_s, method="rest_to_rest")
         return traj
 
-    def _finish(self, path: Array, how: str, t0: float, *, method: str | None = None) -> Plan:
-        notes: list[str] = []
-        t1 = time.perf_counter()
-        traj = self._timed(path, method or self.config.timing, notes=notes)
-        t2 = time.perf_counter()
-        return Plan(traj, path, how, t1 - t0, t2 - t1, notes)
-
 
 # --- blending -------------------------------------------------------------------------------------
 @dataclass(frozen=True)
@@ -430,8 +452,12 @@ class BlendPart:
     """One move of a blended run: the planner of its scene and options, and its checked joint path."""
 
     planner: MotionPlanner
-    path: Array  # from the end of the previous part to this move's goal
+    found: PathPlan  # from the end of the previous part to this move's goal
     line: bool  # a dense straight tool line (timed without the jerk limit, as plan_cartesian does)
+
+    @property
+    def path(self) -> Array:
+        return self.found.path
 
 
 def _common_limits(parts: Sequence[BlendPart]) -> JointLimits:

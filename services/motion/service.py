@@ -230,10 +230,10 @@ class MotionPlannerServicer(motion_pb2_grpc.MotionPlannerServicer):
                 raise InvalidInputError("a waypoint plan needs at least one waypoint")
             start = q = _joints(request.start, "start")
             names: tuple[str, ...] = ()
-            pieces: list[JointTrajectory] = []
-            parts: list[BlendPart | None] = []  # per waypoint: what a blend through it needs
-            paths, used, notes = [q[None]], [], []
-            planning_s = timing_s = 0.0
+            parts: list[BlendPart | None] = []  # per waypoint: its checked path (None: already there)
+            paths, used = [q[None]], []
+            notes: list[str] = []
+            planning_s = 0.0
             for k, w in enumerate(request.waypoints):
                 # each waypoint exactly as its own PlanJoints / PlanCartesian request would plan it
                 planner = self._planner(
@@ -249,26 +249,22 @@ class MotionPlannerServicer(motion_pb2_grpc.MotionPlannerServicer):
                     )
                 if w.motion == motion_pb2.MotionWaypoint.LINEAR:
                     T_goal = pose_to_matrix(w.pose, f"{what}.pose") if goal is None else planner.kin.fk(goal)
-                    plan = planner.plan_cartesian(q, [T_goal])
+                    found = planner.line_path(q, [T_goal])
                 elif goal is None:
-                    plan = planner.plan_to_pose(q, pose_to_matrix(w.pose, f"{what}.pose"))
+                    found = planner.path_to_pose(q, pose_to_matrix(w.pose, f"{what}.pose"))
                 elif float(np.max(np.abs(goal - q))) < ALREADY_THERE_RAD:
-                    pieces.append(JointTrajectory.hold(names, q))  # nothing to move
-                    parts.append(None)
+                    parts.append(None)  # nothing to move
                     continue
                 else:
-                    plan = planner.plan_joints(q, goal)
-                pieces.append(plan.trajectory)
-                parts.append(BlendPart(planner, plan.path, w.motion == motion_pb2.MotionWaypoint.LINEAR))
-                paths.append(plan.path[1:])
-                used.append(plan.planner)
-                notes += plan.notes
-                planning_s += plan.planning_time_s
-                timing_s += plan.timing_time_s
-                q = plan.trajectory.positions[-1]
-            t_blend = time.perf_counter()
-            self._blend_runs(request, pieces, parts, notes)
-            timing_s += time.perf_counter() - t_blend
+                    found = planner.joints_path(q, goal)
+                parts.append(BlendPart(planner, found, w.motion == motion_pb2.MotionWaypoint.LINEAR))
+                paths.append(found.path[1:])
+                used.append(found.planner)
+                planning_s += found.planning_time_s
+                q = found.path[-1]
+            t_timing = time.perf_counter()
+            pieces = self._timed_runs(request, parts, notes, start, names)
+            timing_s = time.perf_counter() - t_timing
             whole = JointTrajectory.hold(names, start)
             for piece in pieces:
                 whole = whole.append(piece) if len(piece) > 1 else whole
@@ -278,16 +274,20 @@ class MotionPlannerServicer(motion_pb2_grpc.MotionPlannerServicer):
 
         return await self._run("PlanWaypoints", work)
 
-    def _blend_runs(
+    def _timed_runs(
         self,
         request: motion_pb2.PlanWaypointsRequest,
-        pieces: list[JointTrajectory],
         parts: list[BlendPart | None],
         notes: list[str],
-    ) -> None:
-        """Replace each run of moves joined by ``blend`` waypoints with one blended motion cut into
-        its parts (in place); a run that cannot be blended keeps its stops (noted)."""
+        start: np.ndarray,
+        names: tuple[str, ...],
+    ) -> list[JointTrajectory]:
+        """One trajectory per waypoint: each run of moves joined by ``blend`` waypoints timed as one
+        blended motion cut into its parts, every other move timed on its own (so is each move of a run
+        that cannot be blended: it keeps its stops, noted). A blended part is never timed on its own."""
         period = self.settings.robot.servo_period_s
+        pieces: list[JointTrajectory] = []
+        q = start
         k = 0
         while k < len(parts):
             end = k
@@ -296,14 +296,26 @@ class MotionPlannerServicer(motion_pb2_grpc.MotionPlannerServicer):
                     break
                 end += 1
             run = [p for p in parts[k : end + 1] if p is not None]
+            blended: list[JointTrajectory] | None = None
             if len(run) > 1:
                 blended, why = blend(run, period)
                 if blended is None:
                     notes.append(f"waypoints {k}..{end} stop at every waypoint: {why}")
                     log.info("waypoints %d..%d not blended: %s", k, end, why)
-                else:
-                    pieces[k : end + 1] = blended
+            if blended is not None:
+                pieces += blended
+                q = blended[-1].positions[-1]
+            else:
+                for part in parts[k : end + 1]:
+                    if part is None:
+                        pieces.append(JointTrajectory.hold(names, q))
+                        continue
+                    plan = part.planner.timed(part.found)
+                    notes += plan.notes
+                    pieces.append(plan.trajectory)
+                    q = plan.trajectory.positions[-1]
             k = end + 1
+        return pieces
 
     async def CheckTrajectory(
         self, request: motion_pb2.CheckTrajectoryRequest, context: grpc.aio.ServicerContext

@@ -7,8 +7,8 @@ import math
 
 import numpy as np
 
-from services.grasp.reach import TrackLimits, track_paths
-from services.kinematics.analytic import fk
+from services.grasp.reach import TrackLimits, origin_heights, track_paths
+from services.kinematics.analytic import dh_matrices, fk
 from services.kinematics.robot_models import get_robot
 
 SPEC = get_robot("nova5")
@@ -59,3 +59,19 @@ def test_a_jump_is_named_with_the_step_that_ended_the_last_track() -> None:
     assert f"at s{N // 2}," in res.reason[0] and "would jump" in res.reason[0]
     step_deg = float(res.reason[0].split(", ")[-1].split("°")[0])
     assert step_deg > 10.0  # above the threshold it broke (not a step of a track that died earlier)
+
+
+def test_origin_heights_are_the_joint_frames_heights() -> None:
+    """The table check's heights, carried as one row through the chain, are those of the full DH
+    transforms, and the last is the flange's."""
+    spec = get_robot("nova5")
+    q = np.random.default_rng(5).uniform(-3.0, 3.0, (20, 30, 6))
+    theta = q + spec.theta_offset
+    T = dh_matrices(spec, theta[..., 0], 0)
+    want = [T[..., 2, 3]]
+    for i in range(1, spec.dof):
+        T = T @ dh_matrices(spec, theta[..., i], i)
+        want.append(T[..., 2, 3])
+    got = origin_heights(spec, q)
+    assert np.allclose(got, np.stack(want, axis=-1), atol=1e-12)
+    assert np.allclose(got[..., -1], fk(spec, q)[..., 2, 3], atol=1e-12)

@@ -18,6 +18,7 @@ from services.common.messages import matrix_to_pose, pose_to_matrix
 from services.kinematics.model import Kinematics, load_arm
 from services.kinematics.tool import tool_geometry
 from services.kinematics.trajectory import JointLimits, JointTrajectory, verify_trajectory
+from services.motion.planner import MotionPlanner, PathPlan, Plan
 from services.motion.service import MotionService
 
 pytestmark = pytest.mark.integration
@@ -125,9 +126,18 @@ async def test_plan_cartesian_and_waypoints(stub, kin):
     assert np.allclose(traj.positions[-1], Q_PLACE)
 
 
-async def test_blended_waypoints_flow_through_without_stopping(stub, kin):
+async def test_blended_waypoints_flow_through_without_stopping(stub, kin, monkeypatch):
     """A joint move, a line up and a joint move, blended: one motion, faster than stopping at each
-    waypoint, cut into one segment per waypoint that ends in motion where the next one continues."""
+    waypoint, cut into one segment per waypoint that ends in motion where the next one continues.
+    The blended run's moves are timed only together (timing each on its own was most of the work)."""
+    timed_alone: list[str] = []
+    timed = MotionPlanner.timed
+
+    def counting(self: MotionPlanner, found: PathPlan) -> Plan:
+        timed_alone.append(found.planner)
+        return timed(self, found)
+
+    monkeypatch.setattr(MotionPlanner, "timed", counting)
     top = kin.fk(Q_PICK)
     up = top.copy()
     up[2, 3] += 0.06
@@ -147,7 +157,10 @@ async def test_blended_waypoints_flow_through_without_stopping(stub, kin):
             ],
         )
 
-    stopping, blended = await stub.PlanWaypoints(request(False)), await stub.PlanWaypoints(request(True))
+    stopping = await stub.PlanWaypoints(request(False))
+    assert len(timed_alone) == 3  # each move stops: each timed on its own
+    blended = await stub.PlanWaypoints(request(True))
+    assert len(timed_alone) == 3  # the blended run: no move timed on its own
     segs = [JointTrajectory.from_proto(s) for s in blended.segments]
     assert len(segs) == 3 and not [n for n in blended.notes if "stop at every waypoint" in n]
     assert blended.duration_s < stopping.duration_s
