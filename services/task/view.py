@@ -12,6 +12,7 @@ returning to the safe home first.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import coal
@@ -178,28 +179,39 @@ class ViewCheck:
         """Each collision piece: (name, hull in pixels, depths of its points)."""
         return [(name, hull, depth) for name, hull, depth, _, _ in self._pieces(q)]
 
-    def _pieces(self, q: ArrayLike) -> list[tuple[str, Array, Array, float, float]]:
-        """Each collision piece: (name, hull in pixels, depths of its points, its lowest z, its
-        farthest distance from the base axis)."""
+    def _pieces(
+        self, q: ArrayLike, tool_first: bool = False
+    ) -> Iterator[tuple[str, Array, Array, float, float]]:
+        """Each collision piece, one at a time: (name, hull in pixels, depths of its points, its lowest
+        z, its farthest distance from the base axis); from the tool back to the base with ``tool_first``."""
         qv = np.asarray(q, dtype=float)
         if qv.shape != (self.arm.model.nq,):
             raise InvalidInputError(f"joints must have {self.arm.model.nq} values, got shape {qv.shape}")
         pin.forwardKinematics(self.arm.model, self._data, qv)
         pin.updateGeometryPlacements(self.arm.model, self._data, self.arm.collision_model, self._geom_data)
-        out = []
-        for k, obj in enumerate(self.arm.collision_model.geometryObjects):
+        objects = list(enumerate(self.arm.collision_model.geometryObjects))
+        for k, obj in reversed(objects) if tool_first else objects:
             pts = _surface_points(obj.geometry, self._geom_data.oMg[k].homogeneous)
             uv, depth = self.camera.project(pts)
-            out.append(
-                (
-                    obj.name,
-                    convex_hull(uv),
-                    depth,
-                    float(pts[:, 2].min()),
-                    float(np.hypot(pts[:, 0], pts[:, 1]).max()),
-                )
+            yield (
+                obj.name,
+                convex_hull(uv),
+                depth,
+                float(pts[:, 2].min()),
+                float(np.hypot(pts[:, 0], pts[:, 1]).max()),
             )
-        return out
+
+    def _blocks(self, hull: Array, depth: Array, low_z: float, far: float) -> bool:
+        return bool(
+            np.any(depth < MIN_DEPTH_M)
+            or convex_overlap(hull, self.zone_px, self.margin_px)
+            or (
+                self.seen_height_m is not None
+                and low_z < self.table_z_m + self.seen_height_m
+                and far > self.base_radius_m
+                and convex_overlap(hull, self.image_px, self.margin_px)
+            )
+        )
 
     def blocking(self, q: ArrayLike) -> list[str]:
         """The pieces of the arm that overlap the zone's image (or sit at or behind the camera), and
@@ -207,23 +219,12 @@ class ViewCheck:
         (but for the pieces within ``base_radius_m`` of the base axis, which vision leaves out):
         vision takes such a piece for an object standing on the table and leaves out whatever lies
         on its footprint — a rod under a parked arm was measured off (eval, seed 1002)."""
-        out = []
-        for name, hull, depth, low_z, far in self._pieces(q):
-            if (
-                np.any(depth < MIN_DEPTH_M)
-                or convex_overlap(hull, self.zone_px, self.margin_px)
-                or (
-                    self.seen_height_m is not None
-                    and low_z < self.table_z_m + self.seen_height_m
-                    and far > self.base_radius_m
-                    and convex_overlap(hull, self.image_px, self.margin_px)
-                )
-            ):
-                out.append(name)
-        return out
+        return [p[0] for p in self._pieces(q) if self._blocks(*p[1:])]
 
     def clear(self, q: ArrayLike) -> bool:
-        return not self.blocking(q)
+        """No piece blocks the view: the first that does answers (the tool and wrist, looked at
+        first, are the ones in view most often; a search for a parking pose asks many times)."""
+        return not any(self._blocks(*p[1:]) for p in self._pieces(q, tool_first=True))
 
     def arm_points(self, q: ArrayLike) -> Array:
         """Points on the arm's collision pieces at ``q`` (base frame, (N, 3)): each piece's surface

@@ -58,6 +58,22 @@ def test_the_safe_home_leaves_the_view_clear_and_a_grasp_in_the_pick_zone_does_n
     assert "gripper_1" in blocking and not view.clear(over_zone)
 
 
+def test_clear_answers_as_the_full_list_of_blocking_pieces_does() -> None:
+    """clear stops at the first blocking piece (tool first): the same answer as blocking's full list,
+    on the joint line from a pose over the pick zone to the safe home that a parking search walks."""
+    view = view_check(Settings())
+    assert view is not None
+    home = np.radians([180.0, 0.0, 90.0, 0.0, -90.0, 0.0])
+    answers = []
+    for p in ((0.47, 0.0, 0.05), (0.35, 0.2, 0.25), (0.5, -0.25, 0.4)):
+        start = _tool_down_at(home, p)
+        for s in np.linspace(0.0, 1.0, 21):
+            q = start + s * (home - start)
+            answers.append(view.clear(q))
+            assert answers[-1] == (not view.blocking(q))
+    assert any(answers) and not all(answers)
+
+
 def test_a_box_around_the_arm_is_the_arm_and_a_box_elsewhere_is_not() -> None:
     view = view_check(Settings())
     assert view is not None
