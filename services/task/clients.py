@@ -259,7 +259,7 @@ class GrpcMotion:
         req = motion_pb2.PlanWaypointsRequest(start=start.tolist(), scene=self._scene(obstacles, None))
         for m in moves:
             wp = motion_pb2.MotionWaypoint(motion=MOTION_TYPE[m.kind], label=m.label, blend=m.blend)
-            if m.kind is MotionKind.JOINT:
+            if m.kind is MotionKind.JOINT and m.target.ndim == 1:
                 wp.joints.extend(m.target.tolist())
             else:
                 wp.pose.CopyFrom(matrix_to_pose(m.target))

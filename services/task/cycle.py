@@ -17,10 +17,12 @@ Between cycles no state runs: the gap is charged to none.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import time
 import uuid
 from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
 from typing import TypeVar, cast
 
 import numpy as np
@@ -62,6 +64,7 @@ from services.task.ports import (
     GraspPort,
     MotionPort,
     Move,
+    MoveOutcome,
     Observation,
     RobotPort,
     SeenBox,
@@ -78,6 +81,15 @@ BACK_OFF_M = 0.08  # straight up out of a failed grasp before the way home
 
 StateListener = Callable[[CycleState, str], None]
 Wait = Callable[[float], Awaitable[None]]
+
+
+@dataclass(frozen=True)
+class SetOff:
+    """The arm on its way to above the object while the grasp plans: the move, and where it goes from/to."""
+
+    moving: asyncio.Future[MoveOutcome]
+    start: np.ndarray
+    end: np.ndarray
 
 
 class CycleAborted(Exception):
@@ -112,6 +124,7 @@ class Orchestrator:
         # through queued targets, and a failed step must stop it rather than let the stream run dry
         self._flowing = False
         self._grasp_raise_m = 0.0  # this cycle's next grasps go this much higher than seen
+        self._set_off: SetOff | None = None  # the move toward the object while its grasp plans
         # the grasp and motion planners, and the arm against the camera's view of the pick zone
         self._planning = PickPlanning(grasp, motion, self.config, view)
 
@@ -213,9 +226,63 @@ class Orchestrator:
     async def _cycle(self, task: TaskKind, out: PickOutcome, attempts: Attempts) -> None:
         while True:  # each pass: detect → plan → execute; recovery loops back here
             obs = await self._detect(out, attempts)
-            planned = await self._plan(task, obs, out, attempts)
+            planned = await self._plan_setting_off(task, obs, out, attempts)
             if await self._carry_out(planned, obs, out, attempts):
                 return
+
+    async def _plan_setting_off(
+        self, task: TaskKind, obs: Observation, out: PickOutcome, attempts: Attempts
+    ) -> PlannedPick:
+        """PLAN, the arm on its way to above the object meanwhile when a way there was found: only
+        what the arm waits for is PLAN (planning that move, and the plan it finds not yet done when it
+        arrives); the rest is APPROACH."""
+        cfg = self.config
+        if cfg.set_off_height_m <= 0:
+            return await self._plan(task, obs, out, attempts)
+        self._enter(CycleState.PLAN, "setting off toward the object")
+        q = await self.robot.joints()
+        try:
+            traj = await self._timed(
+                self._planning.set_off(task, obs, q),
+                cfg.deadlines.plan_s,
+                "planning the set-off",
+                PlanningError,
+            )
+        except PlanningError as exc:  # no time for it: the arm waits for the plan where it is
+            log.info("no set-off move: %s", exc)
+            traj = None
+        if traj is None:
+            return await self._plan(task, obs, out, attempts)
+        moving = asyncio.ensure_future(
+            self._arm(self.robot.execute(traj), cfg.deadlines.motion_s, "setting off toward the object")
+        )
+        self._set_off = SetOff(moving, q, traj.positions[-1])
+        self._enter(CycleState.APPROACH, "set off toward the object; its grasp plans meanwhile")
+        planning = asyncio.ensure_future(self._plan(task, obs, out, attempts, moving=True))
+        try:
+            await asyncio.wait({planning, moving}, return_when=asyncio.FIRST_COMPLETED)
+            if moving.done() and not moving.cancelled() and isinstance(moving.exception(), SafetyError):
+                await self._arrived()  # a safety stop on the way: raised now, not after the plan
+            if not planning.done():
+                self._enter(CycleState.PLAN, "above the object: waiting for its grasp plan")
+            return await planning
+        except Exception:
+            # given up on (or a safety stop): the arm ends the move it is on before anything else
+            planning.cancel()
+            with contextlib.suppress(RobotError):
+                await self._arrived()
+            raise
+        except BaseException:  # cancelled: so is the move (the robot's stop ends it)
+            planning.cancel()
+            moving.cancel()
+            self._set_off = None
+            raise
+
+    async def _arrived(self) -> None:
+        """The set-off move under way (if any) has ended: its failure is the failure of this step."""
+        set_off, self._set_off = self._set_off, None
+        if set_off is not None:
+            await set_off.moving
 
     async def _carry_out(
         self, planned: PlannedPick, obs: Observation, out: PickOutcome, attempts: Attempts
@@ -233,6 +300,7 @@ class Orchestrator:
     ) -> bool:
         while True:
             try:
+                await self._arrived()
                 await self._execute(planned, self._progress)
                 if self.state is not CycleState.DONE:  # the plan's way home already entered it
                     self._enter(CycleState.DONE, "placed; the arm leaves the camera's view clear")
@@ -319,10 +387,13 @@ class Orchestrator:
 
     # ------------------------------------------------------------------ PLAN
     async def _plan(
-        self, task: TaskKind, obs: Observation, out: PickOutcome, attempts: Attempts
+        self, task: TaskKind, obs: Observation, out: PickOutcome, attempts: Attempts, moving: bool = False
     ) -> PlannedPick:
+        """The next grasp option that plans; ``moving``: the arm sets off meanwhile (its state is
+        APPROACH until it waits for the plan)."""
         while True:
-            self._enter(CycleState.PLAN, f"grasp option {attempts.grasp_variants}")
+            if not moving:
+                self._enter(CycleState.PLAN, f"grasp option {attempts.grasp_variants}")
             try:
                 return await self._timed(
                     self._plan_once(task, obs, out, attempts.grasp_variants),
@@ -335,17 +406,21 @@ class Orchestrator:
                 out.error_code = type(exc).__name__
                 if action is not Action.NEXT_GRASP:
                     out.failure_reason = f"PLAN: {exc}"
+                    if self.state is not CycleState.PLAN:  # the arm was on its way meanwhile
+                        self._enter(CycleState.PLAN, str(exc))
                     raise CycleAborted(out.failure_reason) from exc
                 log.info("plan option failed (%s); trying the next one", exc)
 
     async def _plan_once(
         self, task: TaskKind, obs: Observation, out: PickOutcome, alternative: int
     ) -> PlannedPick:
-        q = await self.robot.joints()
+        set_off = self._set_off  # on the way: planned from where that move ends
+        q = set_off.end if set_off is not None else await self.robot.joints()
         if self._grasp_raise_m > 0:
             log.info("grasping %.0f mm higher than seen after an emptied grasp", self._grasp_raise_m * 1e3)
             obs = seen_higher(obs, self._grasp_raise_m)
-        return await self._planning.plan(task, obs, out, alternative, q)
+        seen_from = set_off.start if set_off is not None else None
+        return await self._planning.plan(task, obs, out, alternative, q, seen_from)
 
     # ------------------------------------------------------------------ EXECUTE
     async def _replan_run(

@@ -35,3 +35,6 @@ class CycleConfig:
     home_rise_to_m: float = 0.25
     # rad/s², per joint: the driver's acceleration limits, which a retimed (paced) touch-down keeps
     max_joint_acceleration: tuple[float, ...] | None = None
+    # the arm sets off toward the object, this high above it (m), while its grasp plans (0: it waits
+    # for the plan at rest)
+    set_off_height_m: float = 0.0

@@ -138,6 +138,15 @@ def box_around(center: np.ndarray, half: float) -> SeenBox:
     return SeenBox(lo, np.asarray(center, dtype=float) + half)
 
 
+def rod_box(rod: SeenRod) -> SeenBox:
+    """The box around a seen rod (its axis between its ends, grown by its radius), down to the table."""
+    r = rod.diameter / 2
+    ends = np.stack([rod.center + s * (rod.length / 2) * rod.axis for s in (1.0, -1.0)])
+    lo, hi = ends.min(axis=0) - r, ends.max(axis=0) + r
+    lo[2] = min(lo[2], 0.0)
+    return SeenBox(lo, hi)
+
+
 def grasp_approach(plan: GraspPlan, i: int) -> bool:
     """Whether waypoint ``i`` is a linear approach whose end the jaws close at, nothing held yet."""
     w = plan.waypoints[i]

@@ -11,8 +11,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from services.common.errors import PlanningError
-from services.common.modes import GripperCommand, TaskKind
+from services.common.errors import PlanningError, RobotError
+from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.kinematics.trajectory import JointTrajectory
 from services.task.cycle_config import CycleConfig
 from services.task.grasp_offsets import order_offsets
@@ -23,6 +23,7 @@ from services.task.moves import (
     object_id,
     park_pose,
     pose_list,
+    rod_box,
     safe_home_of,
     with_way_home,
     without_safe_home,
@@ -45,6 +46,7 @@ from services.task.states import PickOutcome
 log = logging.getLogger("pickplace.task.planning")
 
 RESUME_TOLERANCE_RAD = np.deg2rad(0.5)
+SET_OFF = "SET_OFF"  # the move toward the object while its grasp plans
 OBJECT_MARGIN_M = 0.0  # the motion scene pads every box already (motion.padding_m)
 
 
@@ -55,19 +57,77 @@ class PickPlanning:
     def __init__(self, grasp: GraspPort, motion: MotionPort, config: CycleConfig, view: ArmView | None):
         self.grasp, self.motion, self.config, self.view = grasp, motion, config, view
 
+    async def set_off(self, task: TaskKind, obs: Observation, q: np.ndarray) -> JointTrajectory | None:
+        """A joint move from ``q`` to above the object the first option picks (``set_off_height_m`` above
+        its centre, the tool straight down, the jaws across a rod the way round nearer their turn at ``q``),
+        clear of everything seen, that object included; None when there is none (the arm then waits for
+        the plan where it is). The grasp plans meanwhile: it never depends on where the arm is."""
+        height = self.config.set_off_height_m
+        if (
+            height <= 0
+            or (task is TaskKind.STAND_ROD and not obs.rods)
+            or (task is TaskKind.SORT_CUBES and not obs.cubes)
+        ):
+            return None
+        R_now = (await self.motion.tool_pose(q))[:3, :3]
+        down = np.array([0.0, 0.0, -1.0])
+        if task is TaskKind.STAND_ROD:
+            rod = obs.rods[0]
+            center = rod.center
+            closing = np.cross(down, rod.axis)  # across the rod
+        else:
+            cube = obs.cubes[0]
+            center = cube.centroid
+            closing = R_now[:, 1].copy()  # the jaws turned as they are: the cube's faces are not known here
+        closing[2] = 0.0
+        if float(np.linalg.norm(closing)) < 1e-6:
+            closing = R_now[:, 0].copy()
+            closing[2] = 0.0
+        closing /= np.linalg.norm(closing)
+        if float(np.dot(closing, R_now[:, 1])) < 0:
+            closing = -closing
+        T = np.eye(4)
+        T[:3, :3] = np.column_stack([np.cross(closing, down), closing, down])
+        T[:3, 3] = [center[0], center[1], center[2] + height]
+        everything = (
+            self.not_the_arm(obs.obstacles, q)
+            + tuple(box_around(c.centroid, c.size / 2 + OBJECT_MARGIN_M) for c in obs.cubes)
+            + tuple(rod_box(r) for r in obs.rods)
+        )
+        try:
+            traj = await self.single(q, Move(MotionKind.JOINT, T, label=SET_OFF), everything)
+        except RobotError as exc:  # no way there: the arm waits for the plan where it is
+            log.info("no set-off move above the object (%s): waiting for the plan at rest", exc)
+            return None
+        home = self.config.home_joints
+        if traj is not None and home is not None and not same_branch(traj.positions[-1], np.asarray(home)):
+            # the grasp plans its joints in the safe home's branch: an arm parked elsewhere (the twin's
+            # first pose, turned half round from home) reached the pose above the rod with the elbow the
+            # other way, and went back round for the pre-grasp (6.6 + 2.5 s instead of 0.9 s)
+            log.info("the pose above the object is in another arm branch than the safe home: not set off")
+            return None
+        return traj
+
     async def plan(
-        self, task: TaskKind, obs: Observation, out: PickOutcome, alternative: int, q: np.ndarray
+        self,
+        task: TaskKind,
+        obs: Observation,
+        out: PickOutcome,
+        alternative: int,
+        q: np.ndarray,
+        seen_from: np.ndarray | None = None,
     ) -> PlannedPick:
         """The ``alternative``-th option for an object of ``obs`` with the arm at ``q``; records the
         object, the grasp and the poses on ``out``. A rod: the first one, grasped at the offsets along it in
         turn. Cubes: each seen cube in turn (one that cannot be picked now, hemmed in by its neighbours,
-        waits until they are sorted), then each one's next-best grasp."""
+        waits until they are sorted), then each one's next-best grasp. ``seen_from``: where the arm stood
+        for the picture when it has set off since (it then goes from ``q`` straight to the pre-grasp)."""
         # everything on the table that is not the target is an obstacle for the carried object too
         target_cube = (
             obs.cubes[alternative % len(obs.cubes)] if task is TaskKind.SORT_CUBES and obs.cubes else None
         )
         obstacles = (
-            self.not_the_arm(obs.obstacles, q)
+            self.not_the_arm(obs.obstacles, q if seen_from is None else seen_from)
             + tuple(
                 box_around(c.centroid, c.size / 2 + OBJECT_MARGIN_M)
                 for c in obs.cubes
@@ -114,8 +174,9 @@ class PickPlanning:
         out.pick_pose = pose_list(grasp_wp.T_base_tool)
         out.place_pose = [*map(float, plan.place_position), 0.0, 0.0, 0.0, 1.0]
         home = safe_home_of(plan)
-        if home is not None and not near(q, home) and self.clear(q):
-            plan = without_safe_home(plan)  # out of the camera's view already: straight to the pre-grasp
+        if home is not None and not near(q, home) and (seen_from is not None or self.clear(q)):
+            # out of the camera's view already, or on the way to the object: straight to the pre-grasp
+            plan = without_safe_home(plan)
         if home is not None:
             # back only as far as the first pose that leaves the camera's view clear for the next look
             end = plan.waypoints[-1].joints
@@ -252,6 +313,11 @@ class PickPlanning:
     def clear(self, q: np.ndarray) -> bool:
         """Whether the arm at ``q`` leaves the camera's view of the pick zone clear (by the camera model)."""
         return self.view is not None and bool(self.view.clear(np.asarray(q, dtype=float)))
+
+
+def same_branch(q: np.ndarray, ref: np.ndarray) -> bool:
+    """Whether the elbow (joint 3) and the wrist (joint 5) bend the same way at ``q`` as at ``ref``."""
+    return bool(np.sign(q[2]) == np.sign(ref[2]) and np.sign(q[4]) == np.sign(ref[4]))
 
 
 def near(q: np.ndarray, target: np.ndarray | tuple[float, ...] | None) -> bool:

@@ -113,7 +113,9 @@ class Move:
     """One move for the motion planner, in the scene and at the speed of that move."""
 
     kind: MotionKind  # JOINT: a joint-space move to joint positions; LINEAR: a straight tool line
-    target: np.ndarray  # JOINT: joint positions (rad); LINEAR: the tool pose T_base_tool (4×4)
+    # JOINT: joint positions (rad), or a tool pose T_base_tool (4×4) reached by a joint move to its
+    # collision-free IK solution nearest the start; LINEAR: the tool pose T_base_tool (4×4)
+    target: np.ndarray
     held: object | None = None  # motion's AttachedObject, carried on this move
     slow: bool = False  # a guarded approach: at the touch-down speed scale
     table_contact: bool = False  # the held object may touch the table (lift-off, set-down)
@@ -122,11 +124,12 @@ class Move:
     obstacles: tuple[SeenBox, ...] = ()  # in this move's scene besides the plan's (what was placed)
 
     def __post_init__(self) -> None:
-        shape = {MotionKind.JOINT: (self.target.ndim == 1), MotionKind.LINEAR: (self.target.shape == (4, 4))}
+        pose = self.target.shape == (4, 4)
+        shape = {MotionKind.JOINT: (self.target.ndim == 1 or pose), MotionKind.LINEAR: pose}
         if not shape.get(self.kind, False):
             raise InvalidInputError(
                 f"move {self.label or 'unlabelled'}: a {self.kind} move needs "
-                f"{'joint positions' if self.kind is MotionKind.JOINT else 'a 4×4 tool pose'}, "
+                f"{'joint positions or a 4×4 tool pose' if self.kind is MotionKind.JOINT else 'a 4×4 tool pose'}, "
                 f"got shape {self.target.shape}"
             )
 

@@ -196,7 +196,7 @@ class FakeMotion:
         out: list[JointTrajectory | None] = []
         q = np.asarray(start, dtype=float)
         for m in moves:
-            goal = m.target if m.kind is MotionKind.JOINT else joints_at(m.target[:3, 3])
+            goal = joints_at(m.target[:3, 3]) if m.target.shape == (4, 4) else m.target  # a tool pose
             if m.kind is MotionKind.JOINT and np.max(np.abs(goal - q)) < 1e-9:
                 out.append(None)  # already there
                 continue

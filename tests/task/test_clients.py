@@ -135,9 +135,28 @@ async def test_a_move_carries_its_own_speed(
     assert slow.duration > 2 * normal.duration
 
 
-async def test_a_joint_move_without_a_joint_vector_is_refused_before_any_request() -> None:
-    with pytest.raises(InvalidInputError, match="joint positions"):
-        Move(MotionKind.JOINT, np.eye(4), label="bad")
+async def test_a_joint_move_without_joints_or_a_pose_is_refused_before_any_request() -> None:
+    with pytest.raises(InvalidInputError, match="joint positions or a 4×4 tool pose"):
+        Move(MotionKind.JOINT, np.eye(3), label="bad")
+    with pytest.raises(InvalidInputError, match="a 4×4 tool pose"):
+        Move(MotionKind.LINEAR, Q_PICK, label="bad")
+
+
+async def test_a_joint_move_to_a_pose_goes_to_its_ik_solution_nearest_the_start(
+    channel: grpc.aio.Channel, settings: Settings, kin: Kinematics
+) -> None:
+    """The set-off move: a joint move to a tool pose, exactly as a PlanJoints request to that pose plans it."""
+    motion = GrpcMotion(motion_pb2_grpc.MotionPlannerStub(channel), settings)
+    target = kin.fk(Q_PLACE)
+    (traj,) = await motion.plan_moves(Q_PICK, [Move(MotionKind.JOINT, target, label="set off")], (BOX,))
+    assert traj is not None
+    assert np.allclose(kin.fk(traj.positions[-1]), target, atol=1e-6)
+    alone = await motion_pb2_grpc.MotionPlannerStub(channel).PlanJoints(
+        motion_pb2.PlanJointsRequest(
+            start=Q_PICK.tolist(), goal_pose=matrix_to_pose(target), scene=motion._scene((BOX,), None)
+        )
+    )
+    assert np.array_equal(traj.positions, JointTrajectory.from_proto(alone.trajectory).positions)
 
 
 async def test_the_grasp_plan_is_built_around_the_measured_rod(

@@ -45,6 +45,9 @@ class TaskSettings(Model):
     # goes only as far toward the safe home as that takes), decided by projecting its collision model
     # into the camera (sim.twin.camera) against the pick zone (sim.twin.scene) raised to this height.
     park_out_of_view: bool = True
+    # Once vision has seen the object the arm sets off toward a pose above it (the approach height, jaws
+    # across a rod) while the grasp plans from there: the planning no longer holds the arm at rest.
+    set_off_before_planned: bool = True
     view_zone_height_m: float = Field(0.06, ge=0, le=0.5)
     view_margin_px: float = Field(12.0, ge=0, le=200)
     # A fresh twin scene after each cycle in `pickplace up` (the simulated operator lays the rod down again).
