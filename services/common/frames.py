@@ -62,6 +62,20 @@ def make_transform(R: ArrayLike, p: ArrayLike) -> Array:
     return T
 
 
+def tool_rotation(approach: ArrayLike, closing: ArrayLike) -> Array:
+    """Rotation base←tool with tool z = approach and tool y = closing (made orthogonal to it): the tool
+    frame of every gripper here (z out of the flange, y the jaws' closing direction, x = y × z)."""
+    z = np.asarray(approach, dtype=float)
+    z = z / np.linalg.norm(z)
+    y = np.asarray(closing, dtype=float)
+    y = y - (y @ z) * z
+    ny = np.linalg.norm(y)
+    if ny < 1e-9:
+        raise InvalidInputError("the closing direction must not be parallel to the approach")
+    y = y / ny
+    return np.column_stack([np.cross(y, z), y, z])
+
+
 def invert_transform(T: Array) -> Array:
     R, p = T[:3, :3], T[:3, 3]
     return make_transform(R.T, -R.T @ p)

@@ -12,8 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from services.common.frames import tool_rotation
 from services.common.settings import GraspSettings
-from services.grasp.geometry import pose, tool_rotation
+from services.grasp.geometry import pose
 
 Array = np.ndarray
 

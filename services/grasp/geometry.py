@@ -1,6 +1,7 @@
 """Small geometry shared by the grasp cores: tool frames, the gripper's outline, carried cylinders.
 
-Tool frame: z = approach (out of the flange), y = closing direction of the jaws, x = y × z.
+Tool frame (services.common.frames.tool_rotation): z = approach (out of the flange), y = closing
+direction of the jaws, x = y × z.
 """
 
 from __future__ import annotations
@@ -26,19 +27,6 @@ def unit(v: ArrayLike, name: str) -> Array:
     if n < 1e-9:
         raise InvalidInputError(f"{name} must be a non-zero vector, got {a.tolist()}")
     return a / n
-
-
-def tool_rotation(approach: ArrayLike, closing: ArrayLike) -> Array:
-    """Rotation base←tool with tool z = approach and tool y = closing (made orthogonal to it)."""
-    z = np.asarray(approach, dtype=float)
-    z = z / np.linalg.norm(z)
-    y = np.asarray(closing, dtype=float)
-    y = y - (y @ z) * z
-    ny = np.linalg.norm(y)
-    if ny < 1e-9:
-        raise InvalidInputError("the closing direction must not be parallel to the approach")
-    y = y / ny
-    return np.column_stack([np.cross(y, z), y, z])
 
 
 def pose(R: Array, p: ArrayLike) -> Array:

@@ -40,11 +40,11 @@ from services.common.errors import (
     InvalidInputError,
     PlanningError,
 )
-from services.common.frames import finite_vector, invert_transform
+from services.common.frames import finite_vector, invert_transform, tool_rotation
 from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.common.settings import GraspSettings
 from services.grasp.force_closure import evaluate_force_closure
-from services.grasp.geometry import cylinder_lowest_z, lowest_gripper_z, pose, pose_paths, tool_rotation, unit
+from services.grasp.geometry import cylinder_lowest_z, lowest_gripper_z, pose, pose_paths, unit
 from services.grasp.plan import Grasp, Guard, HeldObject, PickPlan, Waypoint
 from services.grasp.reach import check_reach, track_paths
 from services.grasp.synthesis import CollisionCheck, contact_model, track_limits, width_quality

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import logging
 import math
 import time
 from collections.abc import Sequence
@@ -46,6 +47,8 @@ from services.kinematics.trajectory import (
 )
 from services.motion.sampling import PLANNERS, plan_path, seed_planning
 from services.motion.timing import time_parameterize
+
+log = logging.getLogger("pickplace.motion.planner")
 
 LOCAL_MARGIN_RAD = 1.0  # first sampling box: the start–goal box grown by this on every joint
 LOCAL_BUDGET_SHARE = 0.6  # share of the remaining budget the local attempt may use
@@ -526,3 +529,45 @@ def blend(parts: Sequence[BlendPart], split_period_s: float) -> tuple[list[Joint
         if hit is not None:
             return None, f"blended motion touched {p.planner.checker.explain(hit[1])} in part {k}"
     return pieces, ""
+
+
+def time_runs(
+    parts: Sequence[BlendPart | None],
+    blends: Sequence[bool],
+    split_period_s: float,
+    start: Array,
+    names: tuple[str, ...],
+) -> tuple[list[JointTrajectory], list[str]]:
+    """One trajectory per waypoint, and notes: each run of moves joined by waypoints that ``blends``
+    marks is timed as one blended motion cut into its parts (:func:`blend`), every other move on its
+    own, and so is each move of a run that cannot be blended (it keeps its stops, noted). A blended
+    part is never timed on its own. A None part (already there) holds where the arm is."""
+    pieces: list[JointTrajectory] = []
+    notes: list[str] = []
+    q = start
+    k = 0
+    while k < len(parts):
+        end = k
+        while end + 1 < len(parts) and blends[end] and parts[end] is not None and parts[end + 1] is not None:
+            end += 1
+        run = [p for p in parts[k : end + 1] if p is not None]
+        blended: list[JointTrajectory] | None = None
+        if len(run) > 1:
+            blended, why = blend(run, split_period_s)
+            if blended is None:
+                notes.append(f"waypoints {k}..{end} stop at every waypoint: {why}")
+                log.info("waypoints %d..%d not blended: %s", k, end, why)
+        if blended is not None:
+            pieces += blended
+            q = blended[-1].positions[-1]
+        else:
+            for part in parts[k : end + 1]:
+                if part is None:
+                    pieces.append(JointTrajectory.hold(names, q))
+                    continue
+                plan = part.planner.timed(part.found)
+                notes += plan.notes
+                pieces.append(plan.trajectory)
+                q = plan.trajectory.positions[-1]
+        k = end + 1
+    return pieces, notes

@@ -30,7 +30,7 @@ from services.kinematics.model import ArmModel, Kinematics, load_arm
 from services.kinematics.robot_models import ROBOTS
 from services.kinematics.tool import tool_geometry
 from services.kinematics.trajectory import Array, JointTrajectory
-from services.motion.planner import BlendPart, MotionPlanner, Plan, PlannerConfig, blend
+from services.motion.planner import BlendPart, MotionPlanner, Plan, PlannerConfig, time_runs
 
 log = logging.getLogger("pickplace.motion.service")
 
@@ -263,7 +263,9 @@ class MotionPlannerServicer(motion_pb2_grpc.MotionPlannerServicer):
                 planning_s += found.planning_time_s
                 q = found.path[-1]
             t_timing = time.perf_counter()
-            pieces = self._timed_runs(request, parts, notes, start, names)
+            blends = [w.blend for w in request.waypoints]
+            pieces, timing_notes = time_runs(parts, blends, self.settings.robot.servo_period_s, start, names)
+            notes += timing_notes
             timing_s = time.perf_counter() - t_timing
             whole = JointTrajectory.hold(names, start)
             for piece in pieces:
@@ -273,49 +275,6 @@ class MotionPlannerServicer(motion_pb2_grpc.MotionPlannerServicer):
             return resp
 
         return await self._run("PlanWaypoints", work)
-
-    def _timed_runs(
-        self,
-        request: motion_pb2.PlanWaypointsRequest,
-        parts: list[BlendPart | None],
-        notes: list[str],
-        start: np.ndarray,
-        names: tuple[str, ...],
-    ) -> list[JointTrajectory]:
-        """One trajectory per waypoint: each run of moves joined by ``blend`` waypoints timed as one
-        blended motion cut into its parts, every other move timed on its own (so is each move of a run
-        that cannot be blended: it keeps its stops, noted). A blended part is never timed on its own."""
-        period = self.settings.robot.servo_period_s
-        pieces: list[JointTrajectory] = []
-        q = start
-        k = 0
-        while k < len(parts):
-            end = k
-            while end + 1 < len(parts) and request.waypoints[end].blend and parts[end] is not None:
-                if parts[end + 1] is None:
-                    break
-                end += 1
-            run = [p for p in parts[k : end + 1] if p is not None]
-            blended: list[JointTrajectory] | None = None
-            if len(run) > 1:
-                blended, why = blend(run, period)
-                if blended is None:
-                    notes.append(f"waypoints {k}..{end} stop at every waypoint: {why}")
-                    log.info("waypoints %d..%d not blended: %s", k, end, why)
-            if blended is not None:
-                pieces += blended
-                q = blended[-1].positions[-1]
-            else:
-                for part in parts[k : end + 1]:
-                    if part is None:
-                        pieces.append(JointTrajectory.hold(names, q))
-                        continue
-                    plan = part.planner.timed(part.found)
-                    notes += plan.notes
-                    pieces.append(plan.trajectory)
-                    q = plan.trajectory.positions[-1]
-            k = end + 1
-        return pieces
 
     async def CheckTrajectory(
         self, request: motion_pb2.CheckTrajectoryRequest, context: grpc.aio.ServicerContext

@@ -8,7 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from services.common.frames import matrix_to_quat_xyzw
+from services.common.frames import make_transform, matrix_to_quat_xyzw, tool_rotation
 from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.kinematics.trajectory import JointTrajectory
 from services.task.plan import state_for
@@ -145,6 +145,24 @@ def rod_box(rod: SeenRod) -> SeenBox:
     lo, hi = ends.min(axis=0) - r, ends.max(axis=0) + r
     lo[2] = min(lo[2], 0.0)
     return SeenBox(lo, hi)
+
+
+def above_pose(
+    center: np.ndarray, height: float, R_now: np.ndarray, across: np.ndarray | None = None
+) -> np.ndarray:
+    """The tool pose ``height`` above ``center``, straight down, its jaws closing level and across
+    ``across`` (a rod's axis) or, without one, along the tool's closing axis in ``R_now`` (the tool's
+    rotation now); of the two ways round, the one nearer ``R_now``'s."""
+    down = np.array([0.0, 0.0, -1.0])
+    closing = np.cross(down, across) if across is not None else R_now[:, 1].copy()
+    closing[2] = 0.0
+    if float(np.linalg.norm(closing)) < 1e-6:  # no level closing axis there: the tool's x, levelled
+        closing = R_now[:, 0].copy()
+        closing[2] = 0.0
+    if float(np.dot(closing, R_now[:, 1])) < 0:
+        closing = -closing
+    p = np.asarray(center, dtype=float) + [0.0, 0.0, height]
+    return make_transform(tool_rotation(down, closing), p)
 
 
 def grasp_approach(plan: GraspPlan, i: int) -> bool:

@@ -17,6 +17,7 @@ from services.kinematics.trajectory import JointTrajectory
 from services.task.cycle_config import CycleConfig
 from services.task.grasp_offsets import order_offsets
 from services.task.moves import (
+    above_pose,
     blends,
     box_around,
     move_to,
@@ -70,25 +71,10 @@ class PickPlanning:
         ):
             return None
         R_now = (await self.motion.tool_pose(q))[:3, :3]
-        down = np.array([0.0, 0.0, -1.0])
-        if task is TaskKind.STAND_ROD:
-            rod = obs.rods[0]
-            center = rod.center
-            closing = np.cross(down, rod.axis)  # across the rod
-        else:
-            cube = obs.cubes[0]
-            center = cube.centroid
-            closing = R_now[:, 1].copy()  # the jaws turned as they are: the cube's faces are not known here
-        closing[2] = 0.0
-        if float(np.linalg.norm(closing)) < 1e-6:
-            closing = R_now[:, 0].copy()
-            closing[2] = 0.0
-        closing /= np.linalg.norm(closing)
-        if float(np.dot(closing, R_now[:, 1])) < 0:
-            closing = -closing
-        T = np.eye(4)
-        T[:3, :3] = np.column_stack([np.cross(closing, down), closing, down])
-        T[:3, 3] = [center[0], center[1], center[2] + height]
+        if task is TaskKind.STAND_ROD:  # the jaws across the rod
+            T = above_pose(obs.rods[0].center, height, R_now, across=obs.rods[0].axis)
+        else:  # the jaws turned as they are: the cube's faces are not known here
+            T = above_pose(obs.cubes[0].centroid, height, R_now)
         everything = (
             self.not_the_arm(obs.obstacles, q)
             + tuple(box_around(c.centroid, c.size / 2 + OBJECT_MARGIN_M) for c in obs.cubes)
