@@ -399,9 +399,9 @@ def main() -> None:
 
 if __name__ == "__main__":
     if len(sys.argv) > 1 and sys.argv[1] == "driver" and os.environ.get("BENCH_ESTOP_NICE"):
-        from services.robot.service import set_process_nice
+        from services.common.priority import favour_process
 
-        set_process_nice(int(os.environ["BENCH_ESTOP_NICE"]))  # as robot.process_nice does in serve
+        favour_process(int(os.environ["BENCH_ESTOP_NICE"]), "the driver")  # as robot.process_nice does
     if len(sys.argv) > 1 and sys.argv[1] == "controller":
         asyncio.run(_controller())
     elif len(sys.argv) > 1 and sys.argv[1] == "driver":

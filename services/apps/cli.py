@@ -26,6 +26,7 @@ from services.common.errors import ConfigurationError, RobotError
 from services.common.logs import setup_logging
 from services.common.modes import GripperCommand, TaskKind
 from services.common.net import free_loopback_port
+from services.common.priority import favour_process, process_nice
 from services.common.settings import Settings, load_settings
 from services.sim.twin.cli import app as twin_app
 
@@ -113,6 +114,8 @@ def up(
     if seed is not None:
         overrides["sim"] = {"seed": seed}
     s = _settings(profile, config, console_log=False, **overrides)
+    # before any thread or service process starts: they inherit it
+    favour_process(s.robot.process_nice, "the cell")
     if processes:
         from services.apps.launcher import run_processes
 
@@ -180,6 +183,9 @@ def evaluate(
     )
     s.logging.level = "WARNING"
     setup_logging(s.logging, console=True)
+    # the cell before other work, as `pickplace up` runs it; the load stays at the nice this run had
+    ordinary_nice = process_nice()
+    favour_process(s.robot.process_nice, "the cell")
     error = None
     if calibration_error_mm or calibration_error_deg:
         error = (calibration_error_mm / 1000.0, calibration_error_deg)
@@ -204,7 +210,18 @@ def evaluate(
             console.print(f"resuming: {len(journal.done)} trials taken from {journal.path}")
     try:
         report = _run(
-            run_eval(s, trials, seed, task, error, console, load=load, randomize=not nominal, journal=journal)
+            run_eval(
+                s,
+                trials,
+                seed,
+                task,
+                error,
+                console,
+                load=load,
+                randomize=not nominal,
+                journal=journal,
+                load_nice=ordinary_nice,
+            )
         )
     finally:
         if journal is not None:

@@ -163,7 +163,10 @@ def print_report(report: EvalReport, console: Console) -> None:
     if stages:
         t.add_row("median per state (controller clock)", " ".join(f"{k} {v:.2f}" for k, v in stages.items()))
     if s["load"]:
-        t.add_row("load (busy processes beside the cell)", str(s["load"]))
+        t.add_row(
+            "load (busy processes beside the cell)",
+            f"{s['load']} at nice {s['load_nice']}, the cell at nice {s['cell_nice']}",
+        )
     if s["sim_speed_achieved"] is not None:
         t.add_row(
             "sim speed achieved (late ticks)", f"{s['sim_speed_achieved']:.2f}× ({s['sim_late_ticks']})"

@@ -49,6 +49,7 @@ from services.apps.eval_report import BinStat, _p95, sensitivity, wilson_interva
 from services.apps.eval_report import print_report as print_report
 from services.apps.eval_report import write_report as write_report
 from services.common.modes import TaskKind
+from services.common.priority import process_nice
 from services.common.settings import Settings
 from services.kinematics.robot_models import get_robot
 from services.kinematics.trajectory import JointLimits
@@ -61,7 +62,16 @@ MAX_SETTLE_S = 5.0  # ... and at most this long, in steps, while the placed obje
 SETTLE_STEP_S = 0.25
 COMPUTE_STAGES = ("DETECT", "PLAN")  # the states that compute rather than move
 HARNESS_STAGE = "HARNESS"  # stage_reached of a trial the harness could not run
-BUSY_LOOP = "while True: pass"
+# a busy process at the nice value ordinary work on this machine has (the cell's own may be lower)
+BUSY_LOOP = """
+import os, sys
+try:
+    os.setpriority(os.PRIO_PROCESS, 0, int(sys.argv[1]))
+except OSError:
+    pass
+while True:
+    pass
+"""
 
 
 @dataclass
@@ -101,6 +111,8 @@ class EvalSummary(TypedDict):
     trials: int
     seed: int
     load: int
+    cell_nice: int | None  # the nice value the cell ran at (robot.process_nice), the load's beside it
+    load_nice: int | None
     success_rate: float
     success_ci95: tuple[float, float]  # Wilson score interval
     randomized: bool
@@ -128,6 +140,8 @@ class EvalReport:
     trials: int
     seed: int
     load: int = 0
+    cell_nice: int | None = None
+    load_nice: int | None = None
     successes: int = 0
     results: list[TrialResult] = field(default_factory=list)
     wall_time_s: float = 0.0
@@ -156,6 +170,8 @@ class EvalReport:
             "trials": len(self.results),
             "seed": self.seed,
             "load": self.load,
+            "cell_nice": self.cell_nice,
+            "load_nice": self.load_nice,
             "success_rate": self.success_rate,
             "success_ci95": wilson_interval(self.successes, len(self.results)),
             "randomized": self.randomized,
@@ -211,14 +227,17 @@ def execution_bound(
 
 
 @contextlib.contextmanager
-def busy_processes(n: int) -> Iterator[list[subprocess.Popen[bytes]]]:
-    """``n`` CPU-bound processes beside the cell, ended (each by its own id) however the run ends."""
+def busy_processes(n: int, nice: int) -> Iterator[list[subprocess.Popen[bytes]]]:
+    """``n`` CPU-bound processes beside the cell at ``nice`` (ordinary work's, not the cell's they would
+    inherit), ended (each by its own id) however the run ends."""
     procs: list[subprocess.Popen[bytes]] = []
     try:
         for _ in range(n):
-            procs.append(subprocess.Popen([sys.executable, "-c", BUSY_LOOP], stdin=subprocess.DEVNULL))
+            procs.append(
+                subprocess.Popen([sys.executable, "-c", BUSY_LOOP, str(nice)], stdin=subprocess.DEVNULL)
+            )
         if procs:
-            log.info("load: %d busy processes %s", n, [p.pid for p in procs])
+            log.info("load: %d busy processes at nice %d %s", n, nice, [p.pid for p in procs])
         yield procs
     finally:
         for p in procs:
@@ -239,9 +258,11 @@ async def run_eval(
     load: int = 0,
     randomize: bool = True,
     journal: TrialJournal | None = None,
+    load_nice: int | None = None,
 ) -> EvalReport:
     """``journal``: each finished trial is appended to it as it ends, and the trials it already holds
-    (a resumed run) are taken from it instead of run again."""
+    (a resumed run) are taken from it instead of run again. ``load_nice``: the load's nice value (by
+    default this process's: `pickplace eval` passes the one it had before it favoured the cell)."""
     from services.sim.twin.randomization import record_ranges
 
     s = settings.model_copy(
@@ -253,6 +274,8 @@ async def run_eval(
         trials=trials,
         seed=seed,
         load=load,
+        cell_nice=process_nice(),
+        load_nice=(process_nice() if load_nice is None else load_nice) if load else None,
         randomized=randomize,
         ranges=record_ranges(s.sim.twin) if randomize else {},
     )
@@ -263,7 +286,10 @@ async def run_eval(
     # its own state directory (the task's cycle journal): never the cell's, nor another eval's beside it
     # (two evals at once renamed each other's journal, and the second took the first's cycle in progress
     # for one a crash had cut)
-    with tempfile.TemporaryDirectory(prefix="pickplace-eval-") as state_dir, busy_processes(load):
+    with (
+        tempfile.TemporaryDirectory(prefix="pickplace-eval-") as state_dir,
+        busy_processes(load, report.load_nice or 0),
+    ):
         s = s.model_copy(update={"state": s.state.model_copy(update={"dir": state_dir})})
         # no live vision loop: the trials follow each other as `pickplace up`'s cycles do, and there the
         # loop pauses from the first cycle to the last. Between trials (the judge's settle, the next

@@ -18,11 +18,11 @@ import numpy as np
 from pickplace.v1 import common_pb2, robot_pb2, robot_pb2_grpc
 
 from services.common.bus import Bus
-from services.common.errors import ConfigurationError
 from services.common.frames import finite_vector
 from services.common.keys import CellKeys
 from services.common.live_config import LiveConfig
 from services.common.messages import pose_to_matrix
+from services.common.priority import favour_process
 from services.common.settings import Settings
 from services.common.settings.robot import RobotDriverKind
 from services.common.shell import GrpcShell, cell_token
@@ -303,22 +303,8 @@ class RobotService(GrpcShell):
         await self.driver.update_settings(new, changed)
 
 
-def set_process_nice(nice: int) -> None:
-    """Run this process at ``nice`` (robot.process_nice); a clear error when the OS refuses."""
-    import os
-
-    try:
-        os.setpriority(os.PRIO_PROCESS, 0, nice)
-    except OSError as exc:
-        raise ConfigurationError(
-            f"robot.process_nice {nice}: the OS refused ({exc.strerror}); a value below 0 needs CAP_SYS_NICE"
-        ) from exc
-    log.info("robot driver process runs at nice %d", nice)
-
-
 async def serve(settings: Settings) -> None:
     """``pickplace serve robot``: run until cancelled."""
-    if settings.robot.process_nice is not None:
-        set_process_nice(settings.robot.process_nice)
+    favour_process(settings.robot.process_nice, "the robot driver's process")
     async with Bus(settings.zenoh) as bus, RobotService(settings, bus) as svc:
         await svc.wait()

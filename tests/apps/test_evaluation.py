@@ -18,6 +18,7 @@ from services.apps.evaluation import (
     write_report,
 )
 from tests.apps.conftest import cell_settings
+from tests.polling import until
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
@@ -82,10 +83,24 @@ async def test_a_seeds_outcome_and_plan_do_not_depend_on_the_cpu_load(tmp_path):
 
 
 def test_busy_processes_are_started_and_always_ended():
-    with pytest.raises(RuntimeError), busy_processes(2) as procs:
+    with pytest.raises(RuntimeError), busy_processes(2, 0) as procs:
         assert len(procs) == 2 and all(p.poll() is None for p in procs)
         raise RuntimeError("the eval failed")
     assert all(p.returncode is not None for p in procs)
+
+
+async def test_the_load_runs_at_its_own_nice_value_not_the_cells():
+    # the cell favoured (robot.process_nice) would hand its nice value to the load it starts: the load
+    # sets its own, that of ordinary work (a nice value above this process's needs no privilege)
+    import os
+
+    from services.common.priority import process_nice
+
+    ordinary = min(process_nice() + 5, 19)
+    with busy_processes(1, ordinary) as procs:
+        pid = procs[0].pid
+        await until(lambda: os.getpriority(os.PRIO_PROCESS, pid) == ordinary, "the busy process's nice value")
+        assert process_nice() != ordinary and procs[0].poll() is None
 
 
 async def test_a_trial_that_breaks_is_a_harness_error_and_the_run_goes_on(tmp_path, monkeypatch):

@@ -122,23 +122,8 @@ async def test_an_estop_during_a_streamed_trajectory_is_labelled_over_grpc(robot
             assert isinstance(translate(again.value), EmergencyStopError)
 
 
-def test_the_driver_process_can_be_run_at_a_configured_nice_value(settings):
-    import subprocess
-    import sys
-
+def test_the_driver_process_nice_value_is_validated(settings):
     from pydantic import ValidationError
 
-    out = subprocess.run(
-        [
-            sys.executable,
-            "-c",
-            "import os; from services.robot.service import set_process_nice; set_process_nice(7); "
-            "print(os.getpriority(os.PRIO_PROCESS, 0))",
-        ],
-        capture_output=True,
-        text=True,
-        check=True,
-    )
-    assert out.stdout.strip() == "7"
     with pytest.raises(ValidationError, match="process_nice"):
         settings.robot.model_validate({**settings.robot.model_dump(), "process_nice": 30})

@@ -62,8 +62,10 @@ class RobotSettings(Model):
     # ServoJ feed watchdog: a stream the host still owes targets is stopped once the controller has run
     # dry for a period plus this long (controller and host clocks both)
     servo_watchdog_margin_s: float = Field(0.25, gt=0, le=10)
-    # The driver process's nice value when it runs alone (`pickplace serve robot`): below 0 its e-stop
-    # and streams are scheduled before other work on a busy machine (needs CAP_SYS_NICE); null = as is
+    # The nice value of the process the driver runs in: `pickplace serve robot` alone, or the whole cell in
+    # one (`pickplace up`, `pickplace eval`; `up --processes` starts its services from it). Below 0 its
+    # e-stop, its streams, and the replies and frames the arm waits for are scheduled before other work
+    # on a busy machine (services.common.priority; needs CAP_SYS_NICE, refused: a warning); null = as is
     process_nice: int | None = Field(None, ge=-20, le=19)
     # Cap on joint speed the driver accepts in a trajectory, as a fraction of the model's limit.
     max_velocity_scale: float = Field(1.0, gt=0, le=1.0)
