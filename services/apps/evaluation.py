@@ -386,8 +386,8 @@ class _TrialRunner:
             reasons = list(cube.reasons) if cube else ["no cube was picked"]
             tilt_after = None
         d, w = outcome.stage_durations_s, outcome.stage_wall_s
-        compute_wall = sum(w.get(k, 0.0) for k in COMPUTE_STAGES)
-        compute_ctrl = sum(d.get(k, 0.0) for k in COMPUTE_STAGES)
+        compute_wall = sum(w.get(k, 0.0) for k in COMPUTE_STAGES) + outcome.inline_compute_wall_s
+        compute_ctrl = sum(d.get(k, 0.0) for k in COMPUTE_STAGES) + outcome.inline_compute_s
         bound, bound_motion, bound_gripper = execution_bound(
             outcome.executed_waypoints,
             self.limits,

@@ -35,10 +35,12 @@ from services.kinematics.trajectory import JointTrajectory
 from services.task.ports import (
     GraspPlan,
     GripOutcome,
+    HeldRodQuery,
     Move,
     MoveOutcome,
     Observation,
     PlannedWaypoint,
+    SeenAxis,
     SeenBox,
     SeenCube,
     SeenRod,
@@ -47,6 +49,10 @@ from services.task.ports import (
 
 def _v(v: vision_pb2.Vec3) -> np.ndarray:
     return np.array([v.x, v.y, v.z])
+
+
+def _vec3(v: np.ndarray) -> vision_pb2.Vec3:
+    return vision_pb2.Vec3(x=float(v[0]), y=float(v[1]), z=float(v[2]))
 
 
 def boxes_msg(obstacles: tuple[SeenBox, ...]) -> list[motion_pb2.CollisionBox]:
@@ -122,6 +128,21 @@ class GrpcVision:
         cubes = tuple(SeenCube(_v(c.centroid_base), c.color_label) for c in objs.cubes if c.has_base)
         boxes = tuple(SeenBox(_v(o.base.min), _v(o.base.max)) for o in objs.obstacles if o.has_base)
         return Observation(rods, cubes, boxes, tuple(objs.notes), float(objs.timings_ms.get("total", 0.0)))
+
+    async def held_rod_axis(self, query: HeldRodQuery) -> SeenAxis:
+        req = vision_pb2.MeasureHeldRodRequest(
+            point_base=_vec3(query.point),
+            direction_base=_vec3(query.direction),
+            search_radius_m=query.search_radius_m,
+            along_min_m=query.along_min_m,
+            along_max_m=query.along_max_m,
+            skip_min_m=query.skip_min_m,
+            skip_max_m=query.skip_max_m,
+            rod_diameter_m=query.rod_diameter_m,
+        )
+        with rpc_errors():
+            resp = await self._stub.MeasureHeldRod(req, timeout=self._timeout)
+        return SeenAxis(_v(resp.direction_base), _v(resp.point_base), resp.n_points, resp.tilt_deg)
 
 
 MOTION_KIND = {

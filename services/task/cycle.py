@@ -68,11 +68,13 @@ from services.task.ports import (
     Observation,
     RobotPort,
     SeenBox,
+    SeenRod,
     VisionPort,
 )
 from services.task.recording import RecordingRobot
 from services.task.recovery import Action, Attempts, decide
 from services.task.states import CycleState, PickOutcome
+from services.task.straighten import held_rod_query, straightening, turn_from, turned
 
 log = logging.getLogger("pickplace.task.cycle")
 
@@ -456,6 +458,12 @@ class Orchestrator:
                 # turned (seed 1910, a table 4.5 mm above where it was seen): the sensor held until
                 # after LIFT; a touch-down with nothing in the jaws would "place" it and report success
                 await self._check_holding(f"before the touch-down at {w.name}")
+            if w.guard_force_n > 0 and w.holding and not self._progress.reached and not in_motion:
+                q_rest = q_known if q_known is not None else await self.robot.joints()
+                if (q_turned := await self._straighten(planned, i, q_rest)) is not None:
+                    # the touch-down goes turned as the rod was, from where the turn left the arm
+                    q_known, w = q_turned, plan.waypoints[i]
+                    traj = await self._replan_run(planned, i, q_turned, f"planning {w.name} turned")
             if traj is not None and not self._progress.reached and not in_motion:
                 # the arm is at rest: jaws that open at a waypoint it will pass without stopping open now
                 await self._open_ahead(planned, i)
@@ -567,6 +575,76 @@ class Orchestrator:
             f"touch-down at {w.name}, further",
         )
         return res.stopped_early
+
+    async def _straighten(self, planned: PlannedPick, i: int, q: np.ndarray) -> np.ndarray | None:
+        """Before the touch-down at waypoint ``i`` of a rod grasped off its centre: its axis as vision
+        measures it now; leaning more than ``straighten_min_deg``, the tool turns it straight (about the
+        jaws) and the touch-down and what follows go turned as much. Where the arm came to rest, or None
+        when it did not turn (not measured, straight enough, or a measure not to trust: set down as it is)."""
+        cfg = self.config
+        if planned.rod is None or cfg.straighten_from_offset_m <= 0:
+            return None
+        if abs(planned.grasp_offset_m) < cfg.straighten_from_offset_m:
+            return None
+        out, t0 = self._outcome, (self._clock(), self._wall_clock())
+        try:
+            found = await self._straightening(planned, planned.rod, q)
+        finally:  # measuring and planning: compute the arm waits for, though the state is PLACE
+            if out is not None:
+                out.inline_compute_s += self._clock() - t0[0]
+                out.inline_compute_wall_s += self._wall_clock() - t0[1]
+        if found is None:
+            return None
+        traj, R = found
+        turn_from(planned.plan, i, R)
+        res = await self._arm(self.robot.execute(traj), cfg.deadlines.motion_s, "straightening the held rod")
+        return res.final_q
+
+    async def _straightening(
+        self, planned: PlannedPick, rod: SeenRod, q: np.ndarray
+    ) -> tuple[JointTrajectory, np.ndarray] | None:
+        """The move that turns the held rod straight and the turn (3×3), or None when it should not."""
+        cfg = self.config
+        try:
+            T = await self.motion.tool_pose(q)
+            query = held_rod_query(T, rod, planned.grasp_offset_m, cfg.jaw_footprint_m[0], cfg.table_z_m)
+            seen = await self._timed(
+                self.vision.held_rod_axis(query),
+                cfg.deadlines.detect_s,
+                "measuring the held rod",
+                VisionError,
+            )
+        except SafetyError:
+            raise
+        except RobotError as exc:  # no camera, too little of the rod seen, vision down: as it hangs
+            log.info("the held rod was not measured (%s): set down as it hangs", exc)
+            return None
+        if seen.tilt_deg < cfg.straighten_min_deg:
+            return None
+        if seen.tilt_deg > cfg.straighten_max_deg:
+            log.warning(
+                "the held rod measured %.1f° off the vertical, beyond %.1f°: taken for a wrong measure, "
+                "set down as it hangs",
+                seen.tilt_deg,
+                cfg.straighten_max_deg,
+            )
+            return None
+        R = straightening(seen.direction)
+        move = Move(MotionKind.LINEAR, turned(T, R, T[:3, 3]), planned.plan.held_object, label="STRAIGHTEN")
+        try:
+            traj = await self._timed(
+                self._planning.single(q, move, planned.obstacles),
+                cfg.deadlines.plan_s,
+                "planning the straightening of the held rod",
+                PlanningError,
+            )
+        except PlanningError as exc:
+            log.warning("the held rod leans %.1f° and cannot be turned straight: %s", seen.tilt_deg, exc)
+            return None
+        if traj is None:
+            return None
+        log.info("the held rod leans %.2f° (%d points): turned straight", seen.tilt_deg, seen.n_points)
+        return traj, R
 
     async def _check_holding(self, when: str) -> None:
         holding = await self._arm(self.robot.holding(), self.config.deadlines.gripper_s, "grasp check")

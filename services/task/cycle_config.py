@@ -38,3 +38,9 @@ class CycleConfig:
     # the arm sets off toward the object, this high above it (m), while its grasp plans (0: it waits
     # for the plan at rest)
     set_off_height_m: float = 0.0
+    # a rod grasped this far off its centre (m; 0: never) is measured held above the place, and turned
+    # straight when it leans more than straighten_min_deg (but not more than straighten_max_deg)
+    straighten_from_offset_m: float = 0.0
+    straighten_min_deg: float = 0.5
+    straighten_max_deg: float = 12.0
+    table_z_m: float = 0.0  # where vision need not look for the held rod below

@@ -41,6 +41,7 @@ from services.task.ports import (
     Observation,
     PlannedWaypoint,
     SeenBox,
+    SeenRod,
 )
 from services.task.states import PickOutcome
 
@@ -121,6 +122,8 @@ class PickPlanning:
             )
             + tuple(box_around(r.center, r.length / 2 + OBJECT_MARGIN_M) for r in obs.rods[1:])
         )
+        rod: SeenRod | None = None
+        offset = 0.0
         if task is TaskKind.STAND_ROD:
             rod = obs.rods[0]
             place = self._place(replace(obs, obstacles=obstacles))
@@ -179,7 +182,7 @@ class PickPlanning:
             (i for i in range(n) if move_to(plan, i) is not None and not blends(plan, i)), n - 1
         )
         trajs = await self.motions(plan, range(first_stop + 1), q, obstacles)
-        planned = PlannedPick(plan, trajs, obstacles, rest_from=n, home=home)
+        planned = PlannedPick(plan, trajs, obstacles, rest_from=n, home=home, rod=rod, grasp_offset_m=offset)
         if first_stop + 1 < n:
             guarded = next(
                 (i for i in range(first_stop + 1, n) if plan.waypoints[i].guard_force_n > 0), n - 1

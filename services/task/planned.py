@@ -11,7 +11,7 @@ import numpy as np
 
 from services.common.errors import PlanningError
 from services.kinematics.trajectory import JointTrajectory
-from services.task.ports import GraspPlan, SeenBox
+from services.task.ports import GraspPlan, SeenBox, SeenRod
 
 
 @dataclass
@@ -30,6 +30,9 @@ class PlannedPick:
     moved: set[int] = field(default_factory=set)
     # grasp approaches the controller stopped on a contact (each raised once it did)
     touched: set[int] = field(default_factory=set)
+    # a rod being stood: the rod as seen, and how far off its centre it is grasped (m)
+    rod: SeenRod | None = None
+    grasp_offset_m: float = 0.0
 
     async def settle(self, seconds: float) -> None:
         """Wait for the rest of the motions (PlanningError / RobotError as planning raised them)."""

@@ -87,8 +87,37 @@ class GraspPlan:
     summary: str = ""
 
 
+@dataclass(frozen=True)
+class HeldRodQuery:
+    """Where a held rod should hang: within ``search_radius_m`` of the line through ``point`` along
+    ``direction``, ``along_min_m..along_max_m`` along it, less the band ``skip_min_m..skip_max_m``."""
+
+    point: np.ndarray
+    direction: np.ndarray
+    search_radius_m: float
+    along_min_m: float
+    along_max_m: float
+    skip_min_m: float
+    skip_max_m: float
+    rod_diameter_m: float
+
+
+@dataclass(frozen=True)
+class SeenAxis:
+    """A held rod's axis as vision measured it (``direction`` the query's way)."""
+
+    direction: np.ndarray
+    point: np.ndarray
+    n_points: int
+    tilt_deg: float
+
+
 class VisionPort(Protocol):
     async def observe(self) -> Observation: ...
+
+    async def held_rod_axis(self, query: HeldRodQuery) -> SeenAxis:
+        """The axis of the rod the gripper holds, on a frame taken now (ObjectNotDetectedError: too
+        little of it seen)."""
 
 
 class GraspPort(Protocol):

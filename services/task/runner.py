@@ -86,6 +86,10 @@ def cycle_config(settings: Settings) -> CycleConfig:
         home_rise_to_m=settings.grasp.cubes.transport_height_m,  # where carried objects clear the boxes
         # as high as the pre-grasp: the plan's first move from there is short
         set_off_height_m=settings.grasp.approach_distance_m if t.set_off_before_planned else 0.0,
+        straighten_from_offset_m=t.straighten_from_offset_m,
+        straighten_min_deg=t.straighten_min_deg,
+        straighten_max_deg=t.straighten_max_deg,
+        table_z_m=settings.grasp.table_z_m,
     )
 
 

@@ -180,3 +180,33 @@ def fit_plane_ransac(
         inlier_fraction=float(inl.mean()),
         rms_m=float(np.sqrt(np.mean(res[inl] ** 2))),
     )
+
+
+@dataclass(frozen=True)
+class CylinderAxis:
+    """A cylinder's axis: a point on it and its direction."""
+
+    point: Array  # a point on the axis
+    direction: Array  # unit
+
+
+def ray_cylinder_hits(rays: Array, axis: CylinderAxis, r: float) -> tuple[Array, Array, Array]:
+    """Ray parameters (= depth for z = 1 rays) where rays enter/leave the infinite cylinder.
+
+    Returns (s_in, s_out, miss): ``miss`` > 0 for rays that pass the cylinder (then s_in = s_out =
+    the closest approach) and grows with the distance by which they miss.
+    """
+    u, a0 = axis.direction, axis.point
+    du = rays @ u
+    w = rays - np.outer(du, u)
+    q = -(a0 - (a0 @ u) * u)
+    A = np.maximum(np.einsum("ij,ij->i", w, w), 1e-12)
+    B = 2.0 * (w @ q)
+    C = q @ q - r * r
+    disc = B * B - 4 * A * C
+    sq = np.sqrt(np.abs(disc)) / (2 * A)
+    mid = -B / (2 * A)
+    hit = disc >= 0
+    s_in = np.where(hit, mid - sq, mid)
+    s_out = np.where(hit, mid + sq, mid)
+    return s_in, s_out, np.where(hit, 0.0, sq)

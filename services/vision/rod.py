@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -33,9 +32,11 @@ import numpy as np
 from services.common.sensors import CameraIntrinsics
 from services.common.settings import RodDetectionSettings
 from services.vision.geometry import (
+    CylinderAxis,
     Plane,
     pixel_rays,
     project,
+    ray_cylinder_hits,
     ray_factors,
     resolution_scale,
     scaled_stride,
@@ -55,12 +56,6 @@ _FRAGMENT_MIN_ASPECT = 2.0
 _FRAGMENT_AREA_DIVISOR = 3
 _FRAGMENT_MAX_ANGLE_DEG = 8.0
 _FRAGMENT_MAX_OFFSET = 0.5
-
-
-@dataclass(frozen=True)
-class _Axis:
-    point: Array  # a point on the axis (camera frame)
-    direction: Array  # unit
 
 
 def dark_mask(color_rgb: Array, value_max: int) -> Array:
@@ -378,7 +373,7 @@ def _edge_planes(
     return normals[0], normals[1]
 
 
-def _silhouette_axis(n1: Array, n2: Array, plane: Plane, r: float) -> _Axis | None:
+def _silhouette_axis(n1: Array, n2: Array, plane: Plane, r: float) -> CylinderAxis | None:
     """Axis = bisector of the tangent planes ∩ table plane raised by r."""
     m = n1 - n2
     direction = np.cross(m, plane.normal)
@@ -388,7 +383,7 @@ def _silhouette_axis(n1: Array, n2: Array, plane: Plane, r: float) -> _Axis | No
     A = np.vstack([m, plane.normal])
     b = np.array([0.0, r - plane.d])
     point = np.linalg.lstsq(A, b, rcond=None)[0]
-    return _Axis(point, direction / norm)
+    return CylinderAxis(point, direction / norm)
 
 
 def _measured_radius(n1: Array, n2: Array, plane: Plane, near: Array) -> float:
@@ -404,31 +399,9 @@ def _measured_radius(n1: Array, n2: Array, plane: Plane, near: Array) -> float:
     return float(0.5 * (n1 @ p + n2 @ p))
 
 
-def _ray_hits(rays: Array, axis: _Axis, r: float) -> tuple[Array, Array, Array]:
-    """Ray parameters (= depth for z = 1 rays) where rays enter/leave the infinite cylinder.
-
-    Returns (s_in, s_out, miss): ``miss`` > 0 for rays that pass the cylinder (then s_in = s_out =
-    the closest approach) and grows with the distance by which they miss.
-    """
-    u, a0 = axis.direction, axis.point
-    du = rays @ u
-    w = rays - np.outer(du, u)
-    q = -(a0 - (a0 @ u) * u)
-    A = np.maximum(np.einsum("ij,ij->i", w, w), 1e-12)
-    B = 2.0 * (w @ q)
-    C = q @ q - r * r
-    disc = B * B - 4 * A * C
-    sq = np.sqrt(np.abs(disc)) / (2 * A)
-    mid = -B / (2 * A)
-    hit = disc >= 0
-    s_in = np.where(hit, mid - sq, mid)
-    s_out = np.where(hit, mid + sq, mid)
-    return s_in, s_out, np.where(hit, 0.0, sq)
-
-
 def _surface_fit(
-    points: Array, init: _Axis, plane: Plane, r: float, loss_scale: float
-) -> tuple[_Axis, Array]:
+    points: Array, init: CylinderAxis, plane: Plane, r: float, loss_scale: float
+) -> tuple[CylinderAxis, Array]:
     """Cylinder of radius r resting on the table, fitted to the measured depths: (axis, residuals).
 
     The residual is measured depth minus the depth where the pixel's ray meets the model surface —
@@ -443,12 +416,12 @@ def _surface_fit(
     z = points[:, 2]
     rays = points / z[:, None]
 
-    def axis(x: Array) -> _Axis:
+    def axis(x: Array) -> CylinderAxis:
         th, s = x
-        return _Axis(base + s * e2, np.cos(th) * u0 + np.sin(th) * e2)
+        return CylinderAxis(base + s * e2, np.cos(th) * u0 + np.sin(th) * e2)
 
     def residuals(x: Array) -> Array:
-        s_in, _, miss = _ray_hits(rays, axis(x), r)
+        s_in, _, miss = ray_cylinder_hits(rays, axis(x), r)
         return z - s_in + miss
 
     fit = robust_least_squares(
@@ -457,10 +430,12 @@ def _surface_fit(
     return axis(fit.x), fit.residuals
 
 
-def _chord_ends(rays: Array, axis: _Axis, r: float) -> tuple[float, float]:
+def _chord_ends(rays: Array, axis: CylinderAxis, r: float) -> tuple[float, float]:
     """Axial extent of the rod from its silhouette rays (see module docstring, step 5)."""
     u, a0 = axis.direction, axis.point
-    s_in, s_out, _ = _ray_hits(rays, axis, r)  # rays that just miss (quantisation) use the closest approach
+    s_in, s_out, _ = ray_cylinder_hits(
+        rays, axis, r
+    )  # rays that just miss (quantisation) use the closest approach
     du = rays @ u
     t1 = s_in * du - a0 @ u
     t2 = s_out * du - a0 @ u
@@ -514,7 +489,7 @@ def _fit_rod(
     u = axis.direction
     if u[0] < 0 or (abs(u[0]) < 1e-6 and u[1] < 0):
         u = -u
-    axis = _Axis(axis.point, u)
+    axis = CylinderAxis(axis.point, u)
     rays = pixel_rays(intr, rows, cols)
     lo, hi = _chord_ends(rays, axis, r)
     center = axis.point + 0.5 * (lo + hi) * u
@@ -569,7 +544,7 @@ def _fit_rod(
 
 
 def _taller_than_model(
-    depth_m: Array, intr: CameraIntrinsics, plane: Plane, axis: _Axis, lo: float, hi: float, r: float
+    depth_m: Array, intr: CameraIntrinsics, plane: Plane, axis: CylinderAxis, lo: float, hi: float, r: float
 ) -> float:
     """Share of the depth pixels inside the fitted rod's image (its middle 60 % across) that lie
     nearer than the rod's surface: high for a thicker bar trimmed to rod height by the mask."""
@@ -592,25 +567,25 @@ def _taller_than_model(
     ok = z > 0
     if np.count_nonzero(ok) < 20:
         return 0.0
-    s_in, _, _ = _ray_hits(pixel_rays(intr, rows[ok], cols[ok]), axis, r)
+    s_in, _, _ = ray_cylinder_hits(pixel_rays(intr, rows[ok], cols[ok]), axis, r)
     tol = max(0.008, 2.5 * plane.rms_m)
     return float(np.mean(z[ok] < s_in - tol))
 
 
-def _pca_axis(pts: Array, plane: Plane, r: float) -> _Axis:
+def _pca_axis(pts: Array, plane: Plane, r: float) -> CylinderAxis:
     """Initial axis from the depth points alone: the principal axis of their table footprint."""
     pose = estimate_pca_pose(plane.project(pts))
-    return _Axis(pose.position + r * plane.normal, pose.rotation[:, 0])
+    return CylinderAxis(pose.position + r * plane.normal, pose.rotation[:, 0])
 
 
-def _ray_axis_distance(rays: Array, axis: _Axis) -> Array:
+def _ray_axis_distance(rays: Array, axis: CylinderAxis) -> Array:
     u, a0 = axis.direction, axis.point
     cr = np.cross(rays, u)
     norm = np.linalg.norm(cr, axis=1)
     return np.abs(cr @ (-a0)) / np.maximum(norm, 1e-12)
 
 
-def _line_gap(a: _Axis, b: _Axis, at: Array) -> float:
+def _line_gap(a: CylinderAxis, b: CylinderAxis, at: Array) -> float:
     """Distance between two axis lines near ``at``."""
     pa = a.point + ((at - a.point) @ a.direction) * a.direction
     pb = b.point + ((at - b.point) @ b.direction) * b.direction

@@ -7,6 +7,8 @@ A thin shell around :class:`~services.vision.pipeline.VisionPipeline`:
 - detections are published on ``CellKeys.detected_objects`` (``DetectedObjects``) at up to
   ``vision.rate_hz``, with a JPEG overlay on ``CellKeys.vision_debug_image``;
 - ``Vision.Detect`` answers on demand (on a frame in the request, or the newest one);
+- ``Vision.MeasureHeldRod`` fits the axis of a rod the gripper holds, on a fresh frame
+  (:mod:`services.vision.held_rod`);
 - per-stage latency (capture, segmentation, pose, total) goes to the ``vision_latency_seconds``
   histogram of :class:`~services.common.metrics.CellMetrics`.
 
@@ -33,6 +35,7 @@ from services.common.cycle_watch import CycleWatch, follow_cycles
 from services.common.errors import (
     CameraConnectionError,
     ConfigurationError,
+    InvalidInputError,
     ObjectNotDetectedError,
     VisionError,
 )
@@ -47,7 +50,9 @@ from services.common.sensors import (
 )
 from services.common.settings import CameraSourceSettings, Settings
 from services.common.shell import GrpcShell, cell_token
-from services.vision.messages import detections_msg
+from services.vision.geometry import backproject
+from services.vision.held_rod import HeldRodAxis, HeldRodRegion, fit_held_rod_axis, region_mask
+from services.vision.messages import detections_msg, from_vec3, vec3
 from services.vision.overlay import overlay_jpeg
 from services.vision.pipeline import VisionPipeline, replace_timings
 from services.vision.results import DetectionResult
@@ -97,6 +102,31 @@ class VisionServicer(vision_pb2_grpc.VisionServicer):
         if self.service.latest_jpeg is None:
             raise ObjectNotDetectedError("no frame has been processed yet, so there is no debug image")
         return vision_pb2.DebugImage(header=self.service.latest_header, jpeg=self.service.latest_jpeg)
+
+    async def MeasureHeldRod(
+        self, request: vision_pb2.MeasureHeldRodRequest, context: grpc.aio.ServicerContext
+    ) -> vision_pb2.MeasureHeldRodResponse:
+        region = HeldRodRegion(
+            from_vec3(request.point_base),
+            from_vec3(request.direction_base),
+            request.search_radius_m,
+            request.along_min_m,
+            request.along_max_m,
+            request.skip_min_m,
+            request.skip_max_m,
+        )
+        if not request.rod_diameter_m > 0:
+            raise InvalidInputError(f"rod_diameter_m must be > 0, got {request.rod_diameter_m}")
+        axis, frame = await self.service.measure_held_rod(region, request.rod_diameter_m / 2)
+        return vision_pb2.MeasureHeldRodResponse(
+            header=common_pb2.Header(stamp_ns=frame.stamp_ns, frame_id=frame.frame_id, seq=frame.seq),
+            direction_base=vec3(axis.direction),
+            point_base=vec3(axis.point),
+            n_points=axis.n_points,
+            span_m=axis.span_m,
+            rms_m=axis.rms_m,
+            tilt_deg=axis.tilt_deg(),
+        )
 
 
 class VisionService(GrpcShell):
@@ -236,6 +266,29 @@ class VisionService(GrpcShell):
         assert self._bus_frame is not None
         return self._bus_frame
 
+    # --- a held rod --------------------------------------------------------------------------------
+    async def measure_held_rod(
+        self, region: HeldRodRegion, rod_radius_m: float
+    ) -> tuple[HeldRodAxis, RGBDFrame]:
+        """The axis of the rod held in ``region`` (base frame), on a frame taken now."""
+        T = self.T_base_camera
+        if T is None:
+            raise VisionError("vision has no camera-to-base calibration; run `pickplace calibrate`")
+        self._asked += 1
+        try:
+            frame, _ = await self._next_frame(prompt=True)
+            async with self._detect_lock:
+                axis = await asyncio.to_thread(_fit_held_rod, frame, T, region, rod_radius_m)
+        finally:
+            self._asked -= 1
+        log.info(
+            "held rod: %.2f° from the vertical (%d points over %.0f mm)",
+            axis.tilt_deg(),
+            axis.n_points,
+            axis.span_m * 1e3,
+        )
+        return axis, frame
+
     # --- detection -----------------------------------------------------------------------------------
     async def detect_once(
         self, frame: RGBDFrame | None = None, prompt: bool = False, capture_s: float = 0.0
@@ -317,6 +370,16 @@ class VisionService(GrpcShell):
                 if failures in (1, 10) or failures % 100 == 0:  # say it, without flooding the log
                     log.warning("vision loop: %s (%d in a row)", exc, failures)
             await asyncio.sleep(max(0.0, period - (time.monotonic() - t0)))
+
+
+def _fit_held_rod(
+    frame: RGBDFrame, T_base_camera: Array, region: HeldRodRegion, rod_radius_m: float
+) -> HeldRodAxis:
+    depth_m = frame.depth.astype(np.float64) * frame.depth_scale
+    points, _, _ = backproject(
+        depth_m, frame.intrinsics, mask=region_mask(region, T_base_camera, frame.intrinsics)
+    )
+    return fit_held_rod_axis(points, T_base_camera, region, rod_radius_m)
 
 
 class BusCamera:

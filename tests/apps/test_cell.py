@@ -21,6 +21,7 @@ from services.task.runner import cycle_config
 from services.task.states import CycleState
 from tests.apps.conftest import cell_settings
 from tests.conftest import free_port
+from tests.task.fakes import FakeVision
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
@@ -75,7 +76,7 @@ async def test_no_rod_detect_failed_retries_then_abort(tmp_path):
         assert cell.sim.controller.mode.name == "ENABLE"
 
 
-class _FarVision:
+class _FarVision(FakeVision):
     """The real pipeline's answer replaced by a rod 1.5 m away (beyond the Nova5's reach)."""
 
     async def observe(self) -> Observation:

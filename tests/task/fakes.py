@@ -13,16 +13,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from services.common.errors import ObjectNotDetectedError
 from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.kinematics.trajectory import JointTrajectory
 from services.task.cycle import CycleConfig, Orchestrator
 from services.task.ports import (
     GraspPlan,
     GripOutcome,
+    HeldRodQuery,
     Move,
     MoveOutcome,
     Observation,
     PlannedWaypoint,
+    SeenAxis,
     SeenBox,
     SeenCube,
     SeenRod,
@@ -63,15 +66,26 @@ def seen(*rods: SeenRod, cubes: tuple[SeenCube, ...] = (), notes: tuple[str, ...
 
 class FakeVision:
     """Answers each observe() with the next scripted observation (or raises the scripted error);
-    the last entry repeats."""
+    the last entry repeats. A held rod's axis: the next of ``held`` (none scripted: not seen)."""
 
-    def __init__(self, *script: Observation | Exception):
+    def __init__(self, *script: Observation | Exception, held: tuple[SeenAxis | Exception, ...] = ()):
         self.script = list(script)
         self.calls = 0
+        self.held = list(held)
+        self.held_queries: list[HeldRodQuery] = []
 
     async def observe(self) -> Observation:
         item = self.script[min(self.calls, len(self.script) - 1)]
         self.calls += 1
+        if isinstance(item, Exception):
+            raise item
+        return item
+
+    async def held_rod_axis(self, query: HeldRodQuery) -> SeenAxis:
+        self.held_queries.append(query)
+        if not self.held:
+            raise ObjectNotDetectedError("held rod: none scripted")
+        item = self.held[min(len(self.held_queries), len(self.held)) - 1]
         if isinstance(item, Exception):
             raise item
         return item

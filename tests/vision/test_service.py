@@ -340,3 +340,72 @@ def test_calibration_source_precedence(tmp_path):
     from_file = manual.model_copy(update={"file": str(tmp_path / "cal.yaml")})
     T, source = load_T_base_camera(from_file)
     assert source.startswith("calibration file") and np.allclose(T, T_file)
+
+
+class _HeldRodCamera:
+    """A camera that shows a rod held upright, leaning 2°."""
+
+    def __init__(self) -> None:
+        from tests.vision.held_rod_scene import held_rod_scene
+
+        self.scene = held_rod_scene(2.0, 30.0, noise_m=0.001)
+        self.n = 0
+
+    @property
+    def intrinsics(self):  # type: ignore[no-untyped-def]
+        return self.scene.frame.intrinsics
+
+    def capture(self):  # type: ignore[no-untyped-def]
+        self.n += 1
+        f = self.scene.frame
+        return type(f)(f.color, f.depth, f.intrinsics, f.depth_scale, stamp_ns=self.n, seq=self.n)
+
+    def close(self) -> None:
+        pass
+
+
+async def test_a_held_rods_axis_over_grpc_on_a_fresh_frame_and_its_errors(settings):
+    from services.common.errors import InvalidInputError
+    from services.vision.messages import vec3
+    from tests.vision.held_rod_scene import region
+
+    cam = _HeldRodCamera()
+    look = region()
+    request = vision_pb2.MeasureHeldRodRequest(
+        point_base=vec3(look.point),
+        direction_base=vec3(look.direction),
+        search_radius_m=look.radius_m,
+        along_min_m=look.along_min_m,
+        along_max_m=look.along_max_m,
+        skip_min_m=look.skip_min_m,
+        skip_max_m=look.skip_max_m,
+        rod_diameter_m=0.022,
+    )
+    async with (
+        VisionService(
+            settings,
+            None,
+            cam,
+            grpc_port=0,
+            metrics=CellMetrics(CollectorRegistry()),
+            T_base_camera=cam.scene.T_base_camera,
+            publish_loop=False,
+        ) as svc,
+        channel("127.0.0.1", svc.grpc_port) as ch,
+    ):
+        stub = vision_pb2_grpc.VisionStub(ch)
+        reply = await stub.MeasureHeldRod(request)
+        direction = np.array([reply.direction_base.x, reply.direction_base.y, reply.direction_base.z])
+        assert float(direction @ cam.scene.direction) > np.cos(np.deg2rad(0.3))
+        assert abs(reply.tilt_deg - 2.0) < 0.3 and reply.n_points > 200 and reply.span_m > 0.15
+        assert reply.header.seq == cam.n == 1  # measured on a frame taken for it
+        away = vision_pb2.MeasureHeldRodRequest()
+        away.CopyFrom(request)
+        away.point_base.y += 0.3
+        with pytest.raises(ObjectNotDetectedError, match="depth points where it should hang"), rpc_errors():
+            await stub.MeasureHeldRod(away)
+        no_way = vision_pb2.MeasureHeldRodRequest()
+        no_way.CopyFrom(request)
+        no_way.direction_base.CopyFrom(vision_pb2.Vec3())
+        with pytest.raises(InvalidInputError, match="direction must not be zero"), rpc_errors():
+            await stub.MeasureHeldRod(no_way)

@@ -207,3 +207,41 @@ class DebugImage(_message.Message):
     header: _common_pb2.Header
     jpeg: bytes
     def __init__(self, header: _Optional[_Union[_common_pb2.Header, _Mapping]] = ..., jpeg: _Optional[bytes] = ...) -> None: ...
+
+class MeasureHeldRodRequest(_message.Message):
+    __slots__ = ("point_base", "direction_base", "search_radius_m", "along_min_m", "along_max_m", "skip_min_m", "skip_max_m", "rod_diameter_m")
+    POINT_BASE_FIELD_NUMBER: _ClassVar[int]
+    DIRECTION_BASE_FIELD_NUMBER: _ClassVar[int]
+    SEARCH_RADIUS_M_FIELD_NUMBER: _ClassVar[int]
+    ALONG_MIN_M_FIELD_NUMBER: _ClassVar[int]
+    ALONG_MAX_M_FIELD_NUMBER: _ClassVar[int]
+    SKIP_MIN_M_FIELD_NUMBER: _ClassVar[int]
+    SKIP_MAX_M_FIELD_NUMBER: _ClassVar[int]
+    ROD_DIAMETER_M_FIELD_NUMBER: _ClassVar[int]
+    point_base: Vec3
+    direction_base: Vec3
+    search_radius_m: float
+    along_min_m: float
+    along_max_m: float
+    skip_min_m: float
+    skip_max_m: float
+    rod_diameter_m: float
+    def __init__(self, point_base: _Optional[_Union[Vec3, _Mapping]] = ..., direction_base: _Optional[_Union[Vec3, _Mapping]] = ..., search_radius_m: _Optional[float] = ..., along_min_m: _Optional[float] = ..., along_max_m: _Optional[float] = ..., skip_min_m: _Optional[float] = ..., skip_max_m: _Optional[float] = ..., rod_diameter_m: _Optional[float] = ...) -> None: ...
+
+class MeasureHeldRodResponse(_message.Message):
+    __slots__ = ("header", "direction_base", "point_base", "n_points", "span_m", "rms_m", "tilt_deg")
+    HEADER_FIELD_NUMBER: _ClassVar[int]
+    DIRECTION_BASE_FIELD_NUMBER: _ClassVar[int]
+    POINT_BASE_FIELD_NUMBER: _ClassVar[int]
+    N_POINTS_FIELD_NUMBER: _ClassVar[int]
+    SPAN_M_FIELD_NUMBER: _ClassVar[int]
+    RMS_M_FIELD_NUMBER: _ClassVar[int]
+    TILT_DEG_FIELD_NUMBER: _ClassVar[int]
+    header: _common_pb2.Header
+    direction_base: Vec3
+    point_base: Vec3
+    n_points: int
+    span_m: float
+    rms_m: float
+    tilt_deg: float
+    def __init__(self, header: _Optional[_Union[_common_pb2.Header, _Mapping]] = ..., direction_base: _Optional[_Union[Vec3, _Mapping]] = ..., point_base: _Optional[_Union[Vec3, _Mapping]] = ..., n_points: _Optional[int] = ..., span_m: _Optional[float] = ..., rms_m: _Optional[float] = ..., tilt_deg: _Optional[float] = ...) -> None: ...

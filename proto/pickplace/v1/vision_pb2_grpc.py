@@ -44,6 +44,11 @@ class VisionStub:
                 request_serializer=pickplace_dot_v1_dot_vision__pb2.DebugImageRequest.SerializeToString,
                 response_deserializer=pickplace_dot_v1_dot_vision__pb2.DebugImage.FromString,
                 _registered_method=True)
+        self.MeasureHeldRod = channel.unary_unary(
+                '/pickplace.v1.Vision/MeasureHeldRod',
+                request_serializer=pickplace_dot_v1_dot_vision__pb2.MeasureHeldRodRequest.SerializeToString,
+                response_deserializer=pickplace_dot_v1_dot_vision__pb2.MeasureHeldRodResponse.FromString,
+                _registered_method=True)
 
 
 class VisionServicer:
@@ -63,6 +68,14 @@ class VisionServicer:
         context.set_details('Method not implemented!')
         raise NotImplementedError('Method not implemented!')
 
+    def MeasureHeldRod(self, request, context):
+        """The axis of a rod the gripper holds, on a fresh frame: a cylinder of the rod's radius fitted to the
+        depth points around the line it should lie on (NOT_FOUND when too little of it is seen there).
+        """
+        context.set_code(grpc.StatusCode.UNIMPLEMENTED)
+        context.set_details('Method not implemented!')
+        raise NotImplementedError('Method not implemented!')
+
 
 def add_VisionServicer_to_server(servicer, server):
     rpc_method_handlers = {
@@ -75,6 +88,11 @@ def add_VisionServicer_to_server(servicer, server):
                     servicer.GetDebugImage,
                     request_deserializer=pickplace_dot_v1_dot_vision__pb2.DebugImageRequest.FromString,
                     response_serializer=pickplace_dot_v1_dot_vision__pb2.DebugImage.SerializeToString,
+            ),
+            'MeasureHeldRod': grpc.unary_unary_rpc_method_handler(
+                    servicer.MeasureHeldRod,
+                    request_deserializer=pickplace_dot_v1_dot_vision__pb2.MeasureHeldRodRequest.FromString,
+                    response_serializer=pickplace_dot_v1_dot_vision__pb2.MeasureHeldRodResponse.SerializeToString,
             ),
     }
     generic_handler = grpc.method_handlers_generic_handler(
@@ -131,6 +149,33 @@ class Vision:
             '/pickplace.v1.Vision/GetDebugImage',
             pickplace_dot_v1_dot_vision__pb2.DebugImageRequest.SerializeToString,
             pickplace_dot_v1_dot_vision__pb2.DebugImage.FromString,
+            options,
+            channel_credentials,
+            insecure,
+            call_credentials,
+            compression,
+            wait_for_ready,
+            timeout,
+            metadata,
+            _registered_method=True)
+
+    @staticmethod
+    def MeasureHeldRod(request,
+            target,
+            options=(),
+            channel_credentials=None,
+            call_credentials=None,
+            insecure=False,
+            compression=None,
+            wait_for_ready=None,
+            timeout=None,
+            metadata=None):
+        return grpc.experimental.unary_unary(
+            request,
+            target,
+            '/pickplace.v1.Vision/MeasureHeldRod',
+            pickplace_dot_v1_dot_vision__pb2.MeasureHeldRodRequest.SerializeToString,
+            pickplace_dot_v1_dot_vision__pb2.MeasureHeldRodResponse.FromString,
             options,
             channel_credentials,
             insecure,

@@ -48,6 +48,13 @@ class TaskSettings(Model):
     # Once vision has seen the object the arm sets off toward a pose above it (the approach height, jaws
     # across a rod) while the grasp plans from there: the planning no longer holds the arm at rest.
     set_off_before_planned: bool = True
+    # A rod grasped this far or farther off its centre turns in the jaws as it is stood up (its weight
+    # twists it: 1-6° in the twin). Held above the place, vision measures its axis; more than
+    # straighten_min_deg off the vertical, the tool turns it straight before the touch-down (0: never
+    # measured). A measure beyond straighten_max_deg is taken for a wrong one and not acted on.
+    straighten_from_offset_m: float = Field(0.02, ge=0, le=0.2)
+    straighten_min_deg: float = Field(0.5, ge=0, le=10)
+    straighten_max_deg: float = Field(12.0, gt=0, le=30)
     view_zone_height_m: float = Field(0.06, ge=0, le=0.5)
     view_margin_px: float = Field(12.0, ge=0, le=200)
     # A fresh twin scene after each cycle in `pickplace up` (the simulated operator lays the rod down again).
