@@ -40,6 +40,12 @@ def finite_vector(v: ArrayLike, n: int | None, name: str) -> Array:
     return arr
 
 
+def tilt_from_vertical_deg(axis: ArrayLike) -> float:
+    """Angle between ``axis`` (either way along it) and the vertical, 0..90°."""
+    a = np.asarray(axis, dtype=float).reshape(3)
+    return float(np.degrees(np.arccos(np.clip(abs(a[2]) / np.linalg.norm(a), 0.0, 1.0))))
+
+
 def check_transform(T: ArrayLike, name: str = "transform") -> Array:
     """Validate a 4x4 rigid transform (rotation orthonormal, det +1, last row 0 0 0 1)."""
     M = np.asarray(T, dtype=float)

@@ -142,7 +142,7 @@ class GrpcVision:
         )
         with rpc_errors():
             resp = await self._stub.MeasureHeldRod(req, timeout=self._timeout)
-        return SeenAxis(_v(resp.direction_base), _v(resp.point_base), resp.n_points, resp.tilt_deg)
+        return SeenAxis(_v(resp.direction_base), _v(resp.point_base), resp.n_points)
 
 
 MOTION_KIND = {

@@ -13,6 +13,7 @@ from typing import Protocol
 import numpy as np
 
 from services.common.errors import InvalidInputError
+from services.common.frames import tilt_from_vertical_deg
 from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.kinematics.trajectory import JointTrajectory
 
@@ -109,7 +110,10 @@ class SeenAxis:
     direction: np.ndarray
     point: np.ndarray
     n_points: int
-    tilt_deg: float
+
+    @property
+    def tilt_deg(self) -> float:
+        return tilt_from_vertical_deg(self.direction)
 
 
 class VisionPort(Protocol):

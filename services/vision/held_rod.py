@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from services.common.errors import InvalidInputError, ObjectNotDetectedError
+from services.common.frames import finite_vector, tilt_from_vertical_deg
 from services.common.sensors import CameraIntrinsics
 from services.vision.geometry import CylinderAxis, project, ray_cylinder_hits, transform_points
 from services.vision.lsq import robust_least_squares
@@ -47,9 +48,7 @@ class HeldRodRegion:
 
     def __post_init__(self) -> None:
         for name in ("point", "direction"):
-            v = np.asarray(getattr(self, name), dtype=float)
-            if v.shape != (3,) or not np.all(np.isfinite(v)):
-                raise InvalidInputError(f"held rod region: {name} must be 3 finite numbers, got {v!r}")
+            finite_vector(getattr(self, name), 3, f"held rod region: {name}")
         if not np.linalg.norm(self.direction) > 1e-9:
             raise InvalidInputError("held rod region: direction must not be zero")
         bounds = (self.radius_m, self.along_min_m, self.along_max_m, self.skip_min_m, self.skip_max_m)
@@ -103,7 +102,7 @@ class HeldRodAxis:
 
     def tilt_deg(self) -> float:
         """Angle between the rod and the vertical."""
-        return float(np.degrees(np.arccos(min(1.0, abs(float(self.direction[2]))))))
+        return tilt_from_vertical_deg(self.direction)
 
 
 def _side_points(points_camera: Array, T_base_camera: Array, region: HeldRodRegion, r: float) -> Array:

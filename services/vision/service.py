@@ -23,6 +23,7 @@ import contextlib
 import logging
 import threading
 import time
+from collections.abc import Iterator
 from typing import Any
 
 import grpc
@@ -266,6 +267,15 @@ class VisionService(GrpcShell):
         assert self._bus_frame is not None
         return self._bus_frame
 
+    @contextlib.contextmanager
+    def _waited_for(self, prompt: bool) -> Iterator[None]:
+        """A call someone waits for (``prompt``) is under way: the live loop leaves the CPU to it."""
+        self._asked += prompt
+        try:
+            yield
+        finally:
+            self._asked -= prompt
+
     # --- a held rod --------------------------------------------------------------------------------
     async def measure_held_rod(
         self, region: HeldRodRegion, rod_radius_m: float
@@ -274,13 +284,10 @@ class VisionService(GrpcShell):
         T = self.T_base_camera
         if T is None:
             raise VisionError("vision has no camera-to-base calibration; run `pickplace calibrate`")
-        self._asked += 1
-        try:
+        with self._waited_for(True):
             frame, _ = await self._next_frame(prompt=True)
             async with self._detect_lock:
                 axis = await asyncio.to_thread(_fit_held_rod, frame, T, region, rod_radius_m)
-        finally:
-            self._asked -= 1
         log.info(
             "held rod: %.2f° from the vertical (%d points over %.0f mm)",
             axis.tilt_deg(),
@@ -296,8 +303,7 @@ class VisionService(GrpcShell):
         """Detect on ``frame`` (or the newest one), record metrics, publish, refresh the overlay.
         ``prompt``: someone waits for it: a frame stream that takes requests is asked for a frame now,
         and the live loop leaves the CPU to it meanwhile."""
-        self._asked += prompt
-        try:
+        with self._waited_for(prompt):
             if frame is None:
                 frame, capture_s = await self._next_frame(prompt)
             async with self._detect_lock:  # one CPU-bound detection at a time, off the event loop
@@ -305,8 +311,6 @@ class VisionService(GrpcShell):
                 jpeg = await asyncio.to_thread(
                     overlay_jpeg, frame.color, result, self.settings.vision.debug_jpeg_quality
                 )
-        finally:
-            self._asked -= prompt
         result = replace_timings(result, capture=capture_s * 1e3)
         self._observe(result)
         self.latest_result = result

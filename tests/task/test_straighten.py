@@ -75,7 +75,7 @@ def _config(from_offset: float = 0.02) -> CycleConfig:
 
 
 def _axis(deg: float) -> SeenAxis:
-    return SeenAxis(_leaning(deg), np.array([0.45, 0.0, 0.12]), 600, deg)
+    return SeenAxis(_leaning(deg), np.array([0.45, 0.0, 0.12]), 600)
 
 
 async def test_a_leaning_rod_is_turned_straight_before_its_touch_down_and_set_down_turned():

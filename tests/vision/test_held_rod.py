@@ -60,7 +60,7 @@ def test_no_rod_where_it_should_hang_is_not_detected_naming_the_points_seen():
 def test_a_region_without_a_direction_or_with_nan_is_refused_by_name():
     with pytest.raises(InvalidInputError, match="direction must not be zero"):
         HeldRodRegion(GRASP, np.zeros(3), 0.02, -0.1, 0.1)
-    with pytest.raises(InvalidInputError, match="point must be 3 finite numbers"):
+    with pytest.raises(InvalidInputError, match="held rod region: point contains NaN"):
         HeldRodRegion(np.array([0.4, np.nan, 0.2]), np.array([0.0, 0.0, 1.0]), 0.02, -0.1, 0.1)
     with pytest.raises(InvalidInputError, match="along_max > along_min"):
         HeldRodRegion(GRASP, np.array([0.0, 0.0, 1.0]), 0.02, 0.1, -0.1)

@@ -13,7 +13,7 @@ import mujoco
 import numpy as np
 
 from services.common.errors import InvalidInputError
-from services.common.frames import invert_transform, make_transform
+from services.common.frames import invert_transform, make_transform, tilt_from_vertical_deg
 from services.common.settings import TwinCameraSettings
 from services.sim.twin.engine import TwinEngine
 from services.sim.twin.mjcf import camera_axes, camera_pose
@@ -150,8 +150,7 @@ def robot_touches(engine: TwinEngine, name: str) -> bool:
 
 def axis_tilt_deg(T_base_object: Array) -> float:
     """Angle between the object's z axis and the vertical, folded to 0..90° (up or down)."""
-    z = np.asarray(T_base_object)[:3, 2]
-    return float(np.degrees(np.arccos(np.clip(abs(z[2]) / np.linalg.norm(z), 0.0, 1.0))))
+    return tilt_from_vertical_deg(np.asarray(T_base_object)[:3, 2])
 
 
 def slip(T_tool_object_ref: Array, T_tool_object_now: Array) -> tuple[float, float]:
