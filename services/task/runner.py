@@ -90,6 +90,10 @@ def cycle_config(settings: Settings) -> CycleConfig:
         straighten_min_deg=t.straighten_min_deg,
         straighten_max_deg=t.straighten_max_deg,
         table_z_m=settings.grasp.table_z_m,
+        # where the task stands the rod (None: where it lay, the grasp service's choice)
+        place_xy=settings.grasp.rod.place_xy_m,
+        place_region_min=settings.grasp.rod.place_region_min_m,
+        place_region_max=settings.grasp.rod.place_region_max_m,
     )
 
 

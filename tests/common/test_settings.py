@@ -75,3 +75,12 @@ def test_only_the_real_profile_names_the_robot_address():
     assert hits == ["nova5-real.yaml"]
     assert "192.168." not in (CONFIG_DIR / "default.yaml").read_text()
     assert os.environ.get("PICKPLACE_ROBOT__HOST") is None
+
+
+def test_the_rod_place_must_lie_in_its_region():
+    with pytest.raises(ConfigurationError, match=r"place_xy_m \(0\.7, 0\.0\) lies outside the place region"):
+        load_settings("sim", overrides={"grasp": {"rod": {"place_xy_m": [0.7, 0.0]}}})
+    with pytest.raises(ConfigurationError, match="must lie below"):
+        load_settings("sim", overrides={"grasp": {"rod": {"place_region_min_m": [0.6, -0.25]}}})
+    moved = {"place_xy_m": [0.25, 0.35], "place_region_min_m": [0.2, 0.3], "place_region_max_m": [0.3, 0.4]}
+    assert load_settings("sim", overrides={"grasp": {"rod": moved}}).grasp.rod.place_xy_m == (0.25, 0.35)

@@ -43,6 +43,10 @@ class RodStandSettings(Model):
     """Seed 001 §3.5 pick-and-stand; numbers from ``shared/specs/twin-physics-notes.md``."""
 
     place_xy_m: Vec2 | None = Field((0.45, 0.0), description="rod base on the table; None = where it lay")
+    # an object already standing on place_xy_m: the rod goes to the nearest free spot around it (up to
+    # 0.16 m away) inside this region
+    place_region_min_m: Vec2 = (0.35, -0.25)
+    place_region_max_m: Vec2 = (0.60, 0.25)
     grasp_offset_m: float = Field(
         0.0, ge=-0.2, le=0.2, description="grasp point along the rod from its centre"
     )
@@ -89,6 +93,19 @@ class RodStandSettings(Model):
         description="when no turn over the grasp or the place position plans, turn this far from the base "
         "(on the bearing of either): a far rod's turn keeps the elbow off the table there",
     )
+
+    @model_validator(mode="after")
+    def _place_in_region(self) -> RodStandSettings:
+        lo, hi = self.place_region_min_m, self.place_region_max_m
+        if not (lo[0] < hi[0] and lo[1] < hi[1]):
+            raise ValueError(f"rod place_region_min_m {lo} must lie below place_region_max_m {hi} in x and y")
+        p = self.place_xy_m
+        if p is not None and not (lo[0] <= p[0] <= hi[0] and lo[1] <= p[1] <= hi[1]):
+            raise ValueError(
+                f"rod place_xy_m {p} lies outside the place region {lo}..{hi} "
+                "(grasp.rod.place_region_min_m / place_region_max_m)"
+            )
+        return self
 
     @model_validator(mode="after")
     def _guard_starts_above(self) -> RodStandSettings:
