@@ -51,9 +51,11 @@ log = logging.getLogger("pickplace.robot.driver")
 T = TypeVar("T")
 
 START_TOLERANCE_RAD = np.deg2rad(1.0)  # a trajectory must start this close to the measured joints
-# targets queued beyond the lookahead at the end of a trajectory that continues: the controller keeps
-# moving while the next trajectory's request travels (a starved ServoJ queue stops the arm dead)
-CONTINUE_EXTRA_TARGETS = 8
+# targets in hand at the end of a trajectory that continues (0.36 s at 30 ms): the controller keeps
+# moving while the next trajectory's request travels (a starved ServoJ queue stops the arm dead). No
+# more: the call returns once its last target is in hand, and what the task does then (the grasp check
+# after LIFT) must come when the arm is well along the move, not at its start
+CONTINUE_TARGETS = 12
 # a target is sent on feedback no older than this (host clock): after the host stalled, the packets
 # that queued meanwhile are read first (the controller may have run dry in the meantime)
 STALE_FEEDBACK_NS = 20_000_000
@@ -464,7 +466,7 @@ class RobotDriver(Supervision):
         t0 = loop.time()
         base = self.settings.robot.servo_lookahead
         if not wait_done:  # the next trajectory's request comes in while these run: more in hand
-            base += CONTINUE_EXTRA_TARGETS
+            base = max(base, CONTINUE_TARGETS)
         ids: list[int | None] = []
         resumed = 0
         via_rest = False  # the host fell behind: let the controller run dry, then resume from rest

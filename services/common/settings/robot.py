@@ -54,7 +54,8 @@ class RobotSettings(Model):
     # ServoJ targets kept queued ahead of the one executing (0.3 s at 30 ms): what the host may stall for
     # without the controller running dry. At 4 (0.12 s) the host fell behind and a stream was resumed from
     # rest (a 0.5-1 s ramp) 3 times in 20 twin trials at 1x on a quiet machine, 5 times beside 6 busy
-    # processes; at 10, never. Stops and touch-downs are not held up by it: Stop halts the queue.
+    # processes; at 10, never. Stops and touch-downs are not held up by it: Stop halts the queue. A stream
+    # that continues into the next keeps 12 (services.robot.driver.CONTINUE_TARGETS).
     servo_lookahead: int = Field(10, ge=1, le=100, description="ServoJ targets queued ahead of execution")
     reconnect: ReconnectSettings = ReconnectSettings()
     workspace: WorkspaceBounds = WorkspaceBounds()
