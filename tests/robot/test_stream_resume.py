@@ -122,30 +122,10 @@ async def proxied(robot_settings: Any, sim_server: Any) -> AsyncIterator[tuple[R
         await d.client.close()
 
 
-def _stall_until_dry(sim: Any, driver: RobotDriver, after_targets: int) -> None:
+def _stall(sim: Any, driver: RobotDriver, after_targets: int, executed: int | None = None) -> list[int]:
     """A listener that freezes the host (the driver's event loop) once ``after_targets`` ServoJ have
-    gone out, until the controller has run out of targets and rests (its own state, read in-process)."""
-    fired = False
-
-    def listener(fb: FeedbackState) -> None:
-        nonlocal fired
-        monitor = driver._monitor
-        if fired or not isinstance(monitor, StreamMonitor) or monitor.targets_sent < after_targets:
-            return
-        fired = True
-        deadline = time.monotonic() + 30.0  # a safety net only: the controller's own state ends it
-        while time.monotonic() < deadline:
-            with sim.lock:
-                if sim.controller.mode == RobotMode.ENABLE:
-                    return
-            time.sleep(0.002)  # the stalled host: the loop stands still while the controller runs
-
-    driver.client.add_listener(listener)
-
-
-def _stall_for_targets(sim: Any, driver: RobotDriver, after_targets: int, executed: int) -> list[int]:
-    """A listener that freezes the host once ``after_targets`` ServoJ have gone out, until the controller
-    has gone on by ``executed`` targets (its command id, read in-process); returns how many it went on."""
+    gone out, until the controller has gone on by ``executed`` targets (its command id) or, with None,
+    has run out of targets and rests (its own state, read in-process). Returns how many it went on."""
     went: list[int] = []
 
     def listener(fb: FeedbackState) -> None:
@@ -158,10 +138,11 @@ def _stall_for_targets(sim: Any, driver: RobotDriver, after_targets: int, execut
         while time.monotonic() < deadline:
             with sim.lock:
                 now, mode = sim.controller.current_cmd_id, sim.controller.mode
-            if now - start >= executed or mode == RobotMode.ENABLE:
+            if mode == RobotMode.ENABLE or (executed is not None and now - start >= executed):
                 went.append(now - start)
                 return
-            time.sleep(0.002)
+            time.sleep(0.002)  # the stalled host: the loop stands still while the controller runs
+        went.append(-1)
 
     driver.client.add_listener(listener)
     return went
@@ -177,7 +158,7 @@ async def test_a_host_stall_shorter_than_the_look_ahead_keeps_the_stream_at_spee
     q0 = driver.joint_positions()
     goal = q0 + np.deg2rad([50, 0, 0, 0, 0, 0])
     traj = quintic_move(q0, goal, joint_names=driver.spec.joint_names, limits=lim)
-    went = _stall_for_targets(sim_server, driver, int(traj.duration / PERIOD) // 2, executed=5)
+    went = _stall(sim_server, driver, int(traj.duration / PERIOD) // 2, executed=5)
     res = await driver.execute_trajectory(traj, PERIOD)
     assert went == [5]  # the host stood still while the controller ran on 5 targets
     assert res.resumed == 0 and driver.stream_resumes == 0
@@ -193,7 +174,7 @@ async def test_a_stream_that_ran_dry_resumes_from_rest_and_nothing_on_the_wire_i
     q0 = driver.joint_positions()
     goal = q0 + np.deg2rad([50, 0, 0, 0, 0, 0])
     traj = quintic_move(q0, goal, joint_names=driver.spec.joint_names, limits=lim)
-    _stall_until_dry(sim_server, driver, after_targets=int(traj.duration / PERIOD) // 2)  # at full speed
+    _stall(sim_server, driver, after_targets=int(traj.duration / PERIOD) // 2)  # at full speed
     res = await driver.execute_trajectory(traj, PERIOD)
     assert res.resumed >= 1 and driver.stream_resumes >= 1
     assert np.max(np.abs(res.final_q - goal)) < driver.settings.robot.goal_tolerance_rad

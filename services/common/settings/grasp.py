@@ -45,8 +45,8 @@ class RodStandSettings(Model):
     place_xy_m: Vec2 | None = Field((0.45, 0.0), description="rod base on the table; None = where it lay")
     # an object already standing on place_xy_m: the rod goes to the nearest free spot around it (up to
     # 0.16 m away) inside this region
-    place_region_min_m: Vec2 = (0.35, -0.25)
-    place_region_max_m: Vec2 = (0.60, 0.25)
+    place_region_min_m: Vec2 = Field((0.35, -0.25), description="free spots for the rod from here ...")
+    place_region_max_m: Vec2 = Field((0.60, 0.25), description="... to here (base frame, m)")
     grasp_offset_m: float = Field(
         0.0, ge=-0.2, le=0.2, description="grasp point along the rod from its centre"
     )
