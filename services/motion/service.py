@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import time
 from collections.abc import Callable, Iterable
 from typing import TypeVar
@@ -46,6 +47,7 @@ T = TypeVar("T")
 
 # a joint waypoint this close to where the arm already is (every joint) plans no motion
 ALREADY_THERE_RAD = 1e-9
+MAX_BLEND_TOLERANCE_M = 0.1  # a corner rounded further is a different path, to be planned as one
 
 
 # --- proto ↔ core ---------------------------------------------------------------------------------
@@ -257,7 +259,14 @@ class MotionPlannerServicer(motion_pb2_grpc.MotionPlannerServicer):
                     continue
                 else:
                     found = planner.joints_path(q, goal)
-                parts.append(BlendPart(planner, found, w.motion == motion_pb2.MotionWaypoint.LINEAR))
+                tol = w.blend_tolerance_m
+                if not (math.isfinite(tol) and 0.0 <= tol <= MAX_BLEND_TOLERANCE_M):
+                    raise InvalidInputError(
+                        f"waypoint {k} ({w.label or 'unlabelled'}): blend_tolerance_m must be within "
+                        f"[0, {MAX_BLEND_TOLERANCE_M}] m, got {tol}"
+                    )
+                line = w.motion == motion_pb2.MotionWaypoint.LINEAR
+                parts.append(BlendPart(planner, found, line, tol if w.blend else 0.0))
                 paths.append(found.path[1:])
                 used.append(found.planner)
                 planning_s += found.planning_time_s

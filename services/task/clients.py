@@ -279,7 +279,12 @@ class GrpcMotion:
             return []
         req = motion_pb2.PlanWaypointsRequest(start=start.tolist(), scene=self._scene(obstacles, None))
         for m in moves:
-            wp = motion_pb2.MotionWaypoint(motion=MOTION_TYPE[m.kind], label=m.label, blend=m.blend)
+            wp = motion_pb2.MotionWaypoint(
+                motion=MOTION_TYPE[m.kind],
+                label=m.label,
+                blend=m.blend,
+                blend_tolerance_m=m.blend_tolerance_m,
+            )
             if m.kind is MotionKind.JOINT and m.target.ndim == 1:
                 wp.joints.extend(m.target.tolist())
             else:

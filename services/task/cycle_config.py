@@ -38,6 +38,8 @@ class CycleConfig:
     # the arm sets off toward the object, this high above it (m), while its grasp plans (0: it waits
     # for the plan at rest)
     set_off_height_m: float = 0.0
+    # how far the tool may leave the planned path where a blended run's corner is rounded (0: never)
+    corner_tolerance_m: float = 0.0
     # a rod grasped this far off its centre (m; 0: never) is measured held above the place, and turned
     # straight when it leans more than straighten_min_deg (but not more than straighten_max_deg)
     straighten_from_offset_m: float = 0.0

@@ -51,6 +51,17 @@ def blends(plan: GraspPlan, i: int) -> bool:
     return w.gripper is None or (w.gripper is GripperCommand.OPEN and not w.holding)
 
 
+def rounds(plan: GraspPlan, i: int) -> bool:
+    """Whether the corner at waypoint ``i`` may be rounded: where the arm flows through it, except
+    beside a release (the move after it starts with the placed object between the open jaws, and that
+    object is in no scene before the way home)."""
+
+    def after_release(j: int) -> bool:
+        return 0 < j < len(plan.waypoints) and plan.waypoints[j - 1].holding and not plan.waypoints[j].holding
+
+    return blends(plan, i) and not after_release(i) and not after_release(i + 1)
+
+
 def ends_in_motion(traj: JointTrajectory) -> bool:
     return bool(np.any(np.abs(traj.velocities[-1]) > 1e-9))
 

@@ -25,6 +25,7 @@ from services.task.moves import (
     park_pose,
     pose_list,
     rod_box,
+    rounds,
     safe_home_of,
     with_way_home,
     without_safe_home,
@@ -217,7 +218,15 @@ class PickPlanning:
         request; a guarded approach is slowed to the grasp plan's touch-down speed."""
         moves = {i: m for i in indices if (m := move_to(plan, i)) is not None}
         last = max(moves, default=-1)
-        moves = {i: replace(m, blend=i != last and blends(plan, i)) for i, m in moves.items()}
+        tolerance = self.config.corner_tolerance_m
+        moves = {
+            i: replace(
+                m,
+                blend=i != last and blends(plan, i),
+                blend_tolerance_m=tolerance if i != last and rounds(plan, i) else 0.0,
+            )
+            for i, m in moves.items()
+        }
         planned = await self.motion.plan_moves(start, list(moves.values()), obstacles)
         if len(planned) != len(moves):
             raise PlanningError(f"the motion planner answered {len(planned)} of {len(moves)} moves")

@@ -154,6 +154,7 @@ class Move:
     table_contact: bool = False  # the held object may touch the table (lift-off, set-down)
     label: str = ""
     blend: bool = False  # the arm does not stop at this move's target: it flows into the next move
+    blend_tolerance_m: float = 0.0  # with blend: how far the tool may cut the corner at the target
     obstacles: tuple[SeenBox, ...] = ()  # in this move's scene besides the plan's (what was placed)
 
     def __post_init__(self) -> None:

@@ -89,6 +89,7 @@ def cycle_config(settings: Settings) -> CycleConfig:
         straighten_from_offset_m=t.straighten_from_offset_m,
         straighten_min_deg=t.straighten_min_deg,
         straighten_max_deg=t.straighten_max_deg,
+        corner_tolerance_m=t.corner_tolerance_m,
         table_z_m=settings.grasp.table_z_m,
         # where the task stands the rod (None: where it lay, the grasp service's choice)
         place_xy=settings.grasp.rod.place_xy_m,

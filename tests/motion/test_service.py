@@ -179,6 +179,52 @@ async def test_blended_waypoints_flow_through_without_stopping(stub, kin, monkey
     assert closest < 0.01
 
 
+async def test_a_blend_tolerance_rounds_the_corners_over_the_wire_and_a_bad_one_is_refused(stub, kin):
+    """The tolerance reaches the planner (the run is faster, its tool within it of the planned path);
+    a negative, NaN or too large one is refused by name, and it has no effect on a waypoint the arm
+    stops at."""
+    up = kin.fk(Q_PICK)
+    up[2, 3] += 0.06
+    q_mid = Q_PICK + np.deg2rad([30, 0, 0, 0, 0, 0])
+
+    def request(tolerance: float, blend: bool = True) -> motion_pb2.PlanWaypointsRequest:
+        return motion_pb2.PlanWaypointsRequest(
+            start=q_mid.tolist(),
+            waypoints=[
+                motion_pb2.MotionWaypoint(
+                    motion=motion_pb2.MotionWaypoint.JOINT,
+                    joints=Q_PICK.tolist(),
+                    blend=blend,
+                    blend_tolerance_m=tolerance,
+                    label="above",
+                ),
+                motion_pb2.MotionWaypoint(motion=motion_pb2.MotionWaypoint.LINEAR, pose=matrix_to_pose(up)),
+            ],
+        )
+
+    exact = await stub.PlanWaypoints(request(0.0))
+    rounded = await stub.PlanWaypoints(request(0.01))
+    assert rounded.duration_s < exact.duration_s
+    whole = JointTrajectory.from_proto(rounded.trajectory)
+    # the corner is cut: the tool never reaches the waypoint it flowed past, and stays within 1 cm of
+    # the path through it
+    closest = min(np.linalg.norm(kin.fk(q)[:3, 3] - kin.fk(Q_PICK)[:3, 3]) for q in whole.positions)
+    assert closest > 1e-3
+    joint_line = [q_mid + u * (Q_PICK - q_mid) for u in np.linspace(0.0, 1.0, 1000)]
+    tool_line = [
+        kin.fk(Q_PICK)[:3, 3] + u * (up[:3, 3] - kin.fk(Q_PICK)[:3, 3]) for u in np.linspace(0, 1, 200)
+    ]
+    ref = np.array([kin.fk(q)[:3, 3] for q in joint_line] + tool_line)
+    got = np.array([kin.fk(q)[:3, 3] for q in whole.positions])
+    assert np.max(np.min(np.linalg.norm(got[:, None] - ref[None], axis=2), axis=1)) <= 0.011
+    stopping = await stub.PlanWaypoints(request(0.01, blend=False))
+    assert np.allclose(JointTrajectory.from_proto(stopping.segments[0]).positions[-1], Q_PICK)
+    for bad in (-0.01, math.nan, 0.5):
+        err = await _error(stub.PlanWaypoints, request(bad))
+        assert err.code() == grpc.StatusCode.INVALID_ARGUMENT
+        assert "waypoint 0 (above): blend_tolerance_m" in err.details()
+
+
 async def test_attached_object_and_allowed_pairs_reach_the_planner(stub):
     across = make_transform(np.array([[0, 0, 1.0], [0, 1.0, 0], [-1.0, 0, 0]]), [0, 0, 0])
     scene = motion_pb2.PlanningScene(

@@ -351,6 +351,7 @@ class FakeCell:
         default_factory=lambda: CycleConfig(
             limits=RetryLimits(detect=2, grasp_variants=3, alarms=2, regrasps=1),
             home_joints=tuple(HOME),
+            corner_tolerance_m=0.01,
         )
     )
     wait: WaitRecorder = field(default_factory=WaitRecorder)

@@ -153,7 +153,7 @@ class PlanCartesianRequest(_message.Message):
     def __init__(self, start: _Optional[_Iterable[float]] = ..., poses: _Optional[_Iterable[_Union[_common_pb2.Pose, _Mapping]]] = ..., scene: _Optional[_Union[PlanningScene, _Mapping]] = ..., options: _Optional[_Union[MotionOptions, _Mapping]] = ...) -> None: ...
 
 class MotionWaypoint(_message.Message):
-    __slots__ = ("motion", "pose", "joints", "label", "scene", "options", "blend")
+    __slots__ = ("motion", "pose", "joints", "label", "scene", "options", "blend", "blend_tolerance_m")
     class MotionType(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
         __slots__ = ()
         MOTION_TYPE_UNSPECIFIED: _ClassVar[MotionWaypoint.MotionType]
@@ -169,6 +169,7 @@ class MotionWaypoint(_message.Message):
     SCENE_FIELD_NUMBER: _ClassVar[int]
     OPTIONS_FIELD_NUMBER: _ClassVar[int]
     BLEND_FIELD_NUMBER: _ClassVar[int]
+    BLEND_TOLERANCE_M_FIELD_NUMBER: _ClassVar[int]
     motion: MotionWaypoint.MotionType
     pose: _common_pb2.Pose
     joints: _containers.RepeatedScalarFieldContainer[float]
@@ -176,7 +177,8 @@ class MotionWaypoint(_message.Message):
     scene: PlanningScene
     options: MotionOptions
     blend: bool
-    def __init__(self, motion: _Optional[_Union[MotionWaypoint.MotionType, str]] = ..., pose: _Optional[_Union[_common_pb2.Pose, _Mapping]] = ..., joints: _Optional[_Iterable[float]] = ..., label: _Optional[str] = ..., scene: _Optional[_Union[PlanningScene, _Mapping]] = ..., options: _Optional[_Union[MotionOptions, _Mapping]] = ..., blend: _Optional[bool] = ...) -> None: ...
+    blend_tolerance_m: float
+    def __init__(self, motion: _Optional[_Union[MotionWaypoint.MotionType, str]] = ..., pose: _Optional[_Union[_common_pb2.Pose, _Mapping]] = ..., joints: _Optional[_Iterable[float]] = ..., label: _Optional[str] = ..., scene: _Optional[_Union[PlanningScene, _Mapping]] = ..., options: _Optional[_Union[MotionOptions, _Mapping]] = ..., blend: _Optional[bool] = ..., blend_tolerance_m: _Optional[float] = ...) -> None: ...
 
 class PlanWaypointsRequest(_message.Message):
     __slots__ = ("start", "waypoints", "scene", "options")

@@ -33,6 +33,13 @@ class TaskSettings(Model):
     # Carrying at the full limits: in 10 seeded twin trials (seed 1000) the grasp held and the tilt before
     # release was no worse than at 0.4 (median 0.34°, max 1.42° against 0.17° / 2.46°), 1.7 s faster.
     holding_speed_scale: float = Field(1.0, gt=0, le=1)
+    # Where the arm flows through a waypoint, the motion planner may round the corner so the arm need not
+    # slow down for it, the tool leaving the planned path by at most this much; the rounded corner is
+    # collision-checked (motion.padding_m from the table and the boxes) in both moves' scenes. Not
+    # after a release, where the placed object stands beside the open jaws in no move's scene.
+    corner_tolerance_m: float = Field(
+        0.01, ge=0, le=0.1, description="how far a blended corner may leave the planned path (0: not rounded)"
+    )
     # a guarded line's planned speed; the task paces it (grasp: slow only through the last band)
     guarded_speed_scale: float = Field(0.5, gt=0, le=1)
     # A guarded touch-down that went its whole overtravel without feeling the contact goes on, guarded and
