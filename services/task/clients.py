@@ -32,6 +32,7 @@ from services.kinematics import analytic
 from services.kinematics.robot_models import get_robot
 from services.kinematics.tool import tool_frame
 from services.kinematics.trajectory import JointTrajectory
+from services.task.passing import PassWatch
 from services.task.ports import (
     GraspPlan,
     GripOutcome,
@@ -341,6 +342,20 @@ class GrpcRobot:
         with rpc_errors():
             js = await self._stub.GetJointStates(robot_pb2.GetJointStatesRequest(), timeout=self._timeout)
         return bool((js.digital_inputs >> (self._object_di - 1)) & 1)
+
+    async def holding_on_passing(self, q: np.ndarray) -> bool | None:
+        if self._object_di is None:
+            return None
+        watch = PassWatch(np.asarray(q, dtype=float))
+        states = self._stub.StreamJointStates(robot_pb2.StreamJointStatesRequest(), timeout=self._timeout)
+        try:
+            with rpc_errors():
+                async for js in states:
+                    if watch.passed(np.array(js.position)):
+                        return bool((js.digital_inputs >> (self._object_di - 1)) & 1)
+        finally:
+            states.cancel()
+        raise RobotCommunicationError("the robot's joint state stream ended before the arm passed the pose")
 
     async def recover(self) -> None:
         with rpc_errors():

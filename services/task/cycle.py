@@ -77,6 +77,9 @@ from services.task.states import CycleState, PickOutcome
 from services.task.straighten import held_rod_query, straightening, turn_from, turned
 
 log = logging.getLogger("pickplace.task.cycle")
+LIFT_CHECK_FAILED = (
+    "grasp verification after LIFT: the object is not in the gripper as the arm passed the lift's end"
+)
 
 T = TypeVar("T")
 BACK_OFF_M = 0.08  # straight up out of a failed grasp before the way home
@@ -125,6 +128,9 @@ class Orchestrator:
         # the last trajectory sent ends in motion and the next has not been sent: the arm flows on
         # through queued targets, and a failed step must stop it rather than let the stream run dry
         self._flowing = False
+        # the grasp check after a LIFT the arm flows on from: the object sensor as the arm passes the
+        # lift's end, read while what follows is queued (None: no check waiting)
+        self._lift_check: asyncio.Future[bool | None] | None = None
         self._grasp_raise_m = 0.0  # this cycle's next grasps go this much higher than seen
         self._set_off: SetOff | None = None  # the move toward the object while its grasp plans
         # the grasp and motion planners, and the arm against the camera's view of the pick zone
@@ -441,6 +447,12 @@ class Orchestrator:
 
     async def _execute(self, planned: PlannedPick, resume: Progress) -> None:
         """From waypoint ``resume.index`` on (its motion skipped when the arm had reached it)."""
+        try:
+            await self._execute_from(planned, resume)
+        finally:
+            self._drop_lift_check()
+
+    async def _execute_from(self, planned: PlannedPick, resume: Progress) -> None:
         cfg = self.config
         plan = planned.plan
         q_known: np.ndarray | None = None  # where the last move ended (no round trip for the joints)
@@ -454,6 +466,7 @@ class Orchestrator:
             if state is not self.state:
                 self._enter(state, w.name)
             if w.guard_force_n > 0 and w.holding and cfg.verify_grasp and not self._progress.reached:
+                self._settle_lift_check()  # the arm rests above the place: passed the lift's end long ago
                 # the fingers may have closed on the table beside the object and slid shut while it
                 # turned (seed 1910, a table 4.5 mm above where it was seen): the sensor held until
                 # after LIFT; a touch-down with nothing in the jaws would "place" it and report success
@@ -480,7 +493,7 @@ class Orchestrator:
                     self._flowing = False  # what flowed on is continued (or stopped) by this one
                     try:
                         res = await self._arm(
-                            self.robot.execute(traj, w.guard_force_n, continues=continues),
+                            self._checked(self.robot.execute(traj, w.guard_force_n, continues=continues)),
                             cfg.deadlines.motion_s,
                             f"motion to {w.name}",
                         )
@@ -537,8 +550,13 @@ class Orchestrator:
                 if close and g.object_detected is False and cfg.verify_grasp:
                     raise GraspFailureError(f"{w.name}: the gripper closed on nothing")
             if state is CycleState.LIFT and cfg.verify_grasp and is_last_of(plan, i, CycleState.LIFT):
-                # before the turn is queued, though the arm flows on: never carry on with an empty gripper
-                await self._check_holding("after LIFT")
+                if in_motion and q_known is not None:
+                    # the call answered with the lift still queued ahead of the arm (how far ahead is the
+                    # driver's look-ahead): the sensor is read as the controller reports the arm passing
+                    # the lift's end, while the turn is queued and flows on (_checked stops it if empty)
+                    self._lift_check = asyncio.ensure_future(self.robot.holding_on_passing(q_known))
+                else:
+                    await self._check_holding("after LIFT")
 
     async def _touch_down_further(self, planned: PlannedPick, i: int) -> bool:
         """A guarded touch-down that went its whole overtravel without feeling the contact (a table lower,
@@ -645,6 +663,55 @@ class Orchestrator:
             return None
         log.info("the held rod leans %.2f° (%d points): turned straight", seen.tilt_deg, seen.n_points)
         return traj, R
+
+    async def _checked(self, motion: Awaitable[MoveOutcome]) -> MoveOutcome:
+        """``motion``, while the grasp check after LIFT waits for the arm to pass the lift's end: found
+        empty meanwhile, the arm is stopped at once and the check fails. A check still waiting when
+        the motion has been handed over stays for the next one."""
+        check = self._lift_check
+        if check is None:
+            return await motion
+        move = asyncio.ensure_future(motion)
+        try:
+            pending: set[asyncio.Future[object]] = {move, check}  # type: ignore[arg-type]
+            await asyncio.wait(pending, return_when=asyncio.FIRST_COMPLETED)
+        except BaseException:
+            move.cancel()
+            raise
+        if check.done():
+            self._lift_check = None
+            if self._lift_check_empty(check):
+                # stopped whether the motion is still being handed over or flows on from what was
+                with contextlib.suppress(RobotError):
+                    await self.robot.stop()
+                with contextlib.suppress(RobotError):  # the motion stopped under it
+                    await move
+                raise GraspFailureError(LIFT_CHECK_FAILED)
+        return await move
+
+    def _settle_lift_check(self) -> None:
+        """The arm at rest past the lift: a check that saw it empty fails now; one that never saw the arm
+        pass (its stream began late) is dropped, and the check that follows reads the sensor."""
+        check, self._lift_check = self._lift_check, None
+        if check is None:
+            return
+        if check.done() and self._lift_check_empty(check):
+            raise GraspFailureError(LIFT_CHECK_FAILED)
+        check.cancel()
+
+    def _drop_lift_check(self) -> None:
+        check, self._lift_check = self._lift_check, None
+        if check is not None:
+            check.cancel()
+
+    @staticmethod
+    def _lift_check_empty(check: asyncio.Future[bool | None]) -> bool:
+        if check.cancelled():
+            return False
+        if (exc := check.exception()) is not None:  # the check that follows reads the sensor instead
+            log.warning("the grasp check as the arm passed the lift's end failed: %s", exc)
+            return False
+        return check.result() is False
 
     async def _check_holding(self, when: str) -> None:
         holding = await self._arm(self.robot.holding(), self.config.deadlines.gripper_s, "grasp check")

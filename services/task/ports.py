@@ -192,6 +192,11 @@ class RobotPort(Protocol):
     async def holding(self) -> bool | None:
         """Whether the gripper's object sensor sees the object (None: no sensor mapped)."""
 
+    async def holding_on_passing(self, q: np.ndarray) -> bool | None:
+        """The object sensor in the joint state the controller reports as the arm passes ``q``
+        (:class:`services.task.passing.PassWatch`), however much motion is queued ahead of it; None:
+        no sensor mapped. Waits until then."""
+
     async def recover(self) -> None:
         """Clear alarms and enable."""
 

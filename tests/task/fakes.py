@@ -8,6 +8,7 @@ scripted to raise an alarm or a safety stop in the middle of a given move.
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -253,6 +254,9 @@ class FakeRobot:
     continued: list[str] = field(default_factory=list)  # labels of the moves sent as continuing
     reached: dict[str, np.ndarray] = field(default_factory=dict)  # where each labelled move left the arm
     safety_stopped: bool = False
+    passings: list[np.ndarray] = field(default_factory=list)  # poses a grasp check waited to pass
+    passing_after: int = 0
+    _moved: asyncio.Event = field(default_factory=asyncio.Event)
     _holding_calls: int = 0
     _guarded_calls: int = 0
 
@@ -275,6 +279,7 @@ class FakeRobot:
         self.clock_s += share * traj.duration
         self.commands.append(("move", traj.meta.get("label", ""), force_guard_n > 0))
         self.reached[str(traj.meta.get("label", ""))] = self.q.copy()
+        self._moved.set()
         if continues:
             self.continued.append(str(traj.meta.get("label", "")))
         if fault is not None:
@@ -297,6 +302,16 @@ class FakeRobot:
         answer = self.holding_script[min(self._holding_calls, len(self.holding_script) - 1)]
         self._holding_calls += 1
         return answer
+
+    async def holding_on_passing(self, q: np.ndarray) -> bool | None:
+        """The next scripted answer, once the arm has gone on by ``passing_after`` moves (the toy arm
+        executes each move at once: what was queued after the pose is the way past it)."""
+        self.passings.append(q.copy())
+        until = self.moves + self.passing_after
+        while self.moves < until:
+            self._moved.clear()
+            await self._moved.wait()
+        return await self.holding()
 
     async def recover(self) -> None:
         from services.common.errors import EmergencyStopError

@@ -4,6 +4,7 @@ carrying each recovery out over scripted fakes (states it went through, commands
 from __future__ import annotations
 
 import asyncio
+import logging
 from dataclasses import replace
 from typing import Any
 
@@ -390,23 +391,52 @@ async def test_a_slipped_grasp_backs_off_open_looks_again_and_regrasps() -> None
     assert cell.vision.calls == 2 and len(cell.grasp.calls) == 2
 
 
-async def test_a_slip_found_while_the_arm_flows_on_from_lift_stops_it_before_backing_off() -> None:
-    """LIFT blends into the turn: the grasp check fails while the arm still runs through LIFT's queued
-    targets. The cycle stops it at once (before, the stream ran dry and the driver's watchdog stopped
-    the arm with a fault, 0.5 s later)."""
+async def test_a_slip_found_as_the_arm_passes_the_lift_end_stops_it_before_backing_off() -> None:
+    """LIFT blends into the turn: the lift's call answers with its targets still queued, so the sensor is
+    read as the controller reports the arm passing the lift's end, while the turn is handed over. Found
+    empty, the cycle stops the arm at once (not when the stream runs dry and the driver's watchdog
+    stops it with a fault) and backs off."""
     cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))), robot=FakeRobot(holding_script=[False, True]))
     cell.motion.blending = True
     outcome = await cell.run()
     assert outcome.success and outcome.attempts == 2 and "LIFT" in cell.robot.continued
+    assert outcome.error_code == "GraspFailureError"
     lift = cell.robot.commands.index(("move", "LIFT", False))
-    assert cell.robot.commands[lift : lift + 4] == [
-        ("move", "LIFT", False),  # ends in motion; the sensor then says the rod is not in the gripper
+    assert cell.robot.commands[lift : lift + 5] == [
+        ("move", "LIFT", False),  # ends in motion
+        ("move", "REORIENT", False),  # handed over while the sensor is awaited: the rod is not there
         ("stop",),
         ("recover",),
         ("gripper", OPEN),
     ]
+    # read where the lift ends, not when its call answered
+    assert np.allclose(cell.robot.passings[0], cell.robot.reached["LIFT"])
     # a stop only where the arm flowed on: the regrasp's own LIFT holds the rod and flows into the turn
     assert cell.robot.commands.count(("stop",)) == 1
+
+
+async def test_a_lift_check_that_never_sees_the_arm_pass_gives_way_to_the_check_before_the_touch_down(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Its joint states began after the arm had passed the lift's end (a stalled host): the arm comes to
+    rest above the place with no answer; the check is dropped and the sensor read there, so no
+    touch-down comes empty-handed."""
+    robot = FakeRobot(holding_script=[False, True], passing_after=10)  # never, in this run
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))), robot=robot)
+    cell.motion.blending = True
+    with caplog.at_level(logging.WARNING, logger="pickplace.task.cycle"):
+        outcome = await cell.run()
+    assert outcome.success and outcome.attempts == 2 and outcome.error_code == "GraspFailureError"
+    assert any("before the touch-down" in r.getMessage() for r in caplog.records)
+    moves = cell.moves()
+    assert moves.index("BACK_OFF") < moves.index("PLACE") and moves.count("PLACE") == 1
+
+
+async def test_without_a_flowing_lift_the_sensor_is_read_when_the_lift_has_ended() -> None:
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))), robot=FakeRobot(holding_script=[False, True]))
+    outcome = await cell.run()  # every move stops: the lift's call answers at its end
+    assert outcome.success and outcome.attempts == 2
+    assert cell.robot.passings == [] and ("stop",) not in cell.robot.commands
 
 
 async def test_an_object_lost_on_the_way_is_found_missing_before_the_touch_down_and_regrasped() -> None:
