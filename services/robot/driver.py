@@ -52,9 +52,9 @@ T = TypeVar("T")
 
 START_TOLERANCE_RAD = np.deg2rad(1.0)  # a trajectory must start this close to the measured joints
 # targets in hand at the end of a trajectory that continues (0.36 s at 30 ms): the controller keeps
-# moving while the next trajectory's request travels (a starved ServoJ queue stops the arm dead). No
-# more: the call returns once its last target is in hand, and what the task does then (the grasp check
-# after LIFT) must come when the arm is well along the move, not at its start
+# moving while the next trajectory's request travels (a starved ServoJ queue stops the arm dead). The
+# call returns once its last target is in hand, that far ahead of the arm: what must wait for the arm
+# to get there (the grasp check after LIFT) waits for the joint states to show it
 CONTINUE_TARGETS = 12
 # a target is sent on feedback no older than this (host clock): after the host stalled, the packets
 # that queued meanwhile are read first (the controller may have run dry in the meantime)
