@@ -703,6 +703,8 @@ class Orchestrator:
         check, self._lift_check = self._lift_check, None
         if check is not None:
             check.cancel()
+            if check.done() and not check.cancelled():
+                check.exception()  # retrieved: a failure of a check no longer asked is not an error
 
     @staticmethod
     def _lift_check_empty(check: asyncio.Future[bool | None]) -> bool:
