@@ -575,8 +575,7 @@ def blend(parts: Sequence[BlendPart], split_period_s: float) -> tuple[list[Joint
     except TrajectoryLimitError as exc:
         if not rounded:
             return None, f"blend not timed: {exc}"
-        log.info("the blend with rounded corners was not timed (%s): through the waypoints instead", exc)
-        return blend([dataclasses.replace(p, corner_tolerance_m=0.0) for p in parts], split_period_s)
+        return _through_the_waypoints(parts, split_period_s, f"not timed ({exc})")
     cuts = _pass_times(whole, [p.path[-1] for p in parts[:-1]])
     period = split_period_s
     bounds = [0.0, *(min(round(t / period) * period, whole.duration) for t in cuts), whole.duration]
@@ -588,8 +587,19 @@ def blend(parts: Sequence[BlendPart], split_period_s: float) -> tuple[list[Joint
             piece, p.planner.config.collision_resolution_rad
         )
         if hit is not None:
-            return None, f"blended motion touched {p.planner.checker.explain(hit[1])} in part {k}"
+            what = f"touched {p.planner.checker.explain(hit[1])} in part {k}"
+            if rounded:  # the spline timed through a curve strays a little from it
+                return _through_the_waypoints(parts, split_period_s, what)
+            return None, f"blended motion {what}"
     return pieces, ""
+
+
+def _through_the_waypoints(
+    parts: Sequence[BlendPart], split_period_s: float, why: str
+) -> tuple[list[JointTrajectory] | None, str]:
+    """The blend again without rounded corners, after the rounded one failed for ``why``."""
+    log.info("the blend with rounded corners %s: through the waypoints instead", why)
+    return blend([dataclasses.replace(p, corner_tolerance_m=0.0) for p in parts], split_period_s)
 
 
 def time_runs(

@@ -126,3 +126,25 @@ def test_a_rounding_that_would_collide_in_either_scene_is_not_taken(planner, mon
     assert pieces is not None, why
     assert checked  # the curves were checked in the next move's scene, and every one refused
     assert sum(p.duration for p in pieces) == pytest.approx(sum(p.duration for p in flat), abs=1e-6)
+
+
+def test_a_rounded_blend_whose_timed_motion_touches_something_flows_through_the_waypoints_instead(
+    planner, monkeypatch
+):
+    flat, _ = blend(_run(planner, 0.0), PERIOD)
+    assert flat is not None
+    parts = _run(planner, 0.01)
+    checks = planner.checker.first_collision_in_trajectory
+    calls: list[float] = []
+
+    def first_touches(traj, resolution_rad):
+        calls.append(traj.duration)
+        if len(calls) == 1:  # the rounded motion's first piece
+            return 0.0, traj.positions[0]
+        return checks(traj, resolution_rad)
+
+    monkeypatch.setattr(planner.checker, "first_collision_in_trajectory", first_touches)
+    pieces, why = blend(parts, PERIOD)
+    assert pieces is not None, why  # not refused: blended still, through the waypoints
+    assert sum(p.duration for p in pieces) == pytest.approx(sum(p.duration for p in flat), abs=1e-6)
+    assert len(calls) == 1 + len(parts)  # the rounded one stopped at its first piece, then each again
