@@ -23,7 +23,7 @@ import time
 import uuid
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
-from typing import TypeVar, cast
+from typing import Any, TypeVar, cast
 
 import numpy as np
 
@@ -673,7 +673,7 @@ class Orchestrator:
             return await motion
         move = asyncio.ensure_future(motion)
         try:
-            pending: set[asyncio.Future[object]] = {move, check}  # type: ignore[arg-type]
+            pending: set[asyncio.Future[Any]] = {move, check}
             await asyncio.wait(pending, return_when=asyncio.FIRST_COMPLETED)
         except BaseException:
             move.cancel()
