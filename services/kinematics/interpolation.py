@@ -1,4 +1,5 @@
-"""Joint-space interpolation: quintic smoothstep / minimum-jerk moves, key-pose cycles, spline smoothing.
+"""Joint-space interpolation: quintic smoothstep / minimum-jerk moves, key-pose cycles, spline smoothing,
+a polyline's arc lengths and its densification.
 
 Sources: seed 001 §3.4 (quintic smoothstep subdivision with ``max_step_deg``),
 seed 003 (minimum-jerk key-pose interpolation with dwell, shortest-angle
@@ -8,6 +9,7 @@ wrapping), LLD §10.2 (cubic-spline smoothing). The results are
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 
@@ -29,6 +31,23 @@ from services.kinematics.trajectory import (
 SMOOTHSTEP_PEAK_VELOCITY = 15.0 / 8.0  # s'(1/2)
 SMOOTHSTEP_PEAK_ACCELERATION = 10.0 / math.sqrt(3.0)  # |s''| at τ = 1/2 ± √3/6
 SMOOTHSTEP_PEAK_JERK = 60.0  # |s'''| at τ = 0 and 1
+
+
+def arc_lengths(path: ArrayLike) -> Array:
+    """Joint-space arc length at every point of a polyline (0 at the first)."""
+    p = np.asarray(path, dtype=float)
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+
+
+def densify(path: ArrayLike, step_rad: float) -> Array:
+    """The polyline with points added on its straight segments so that no joint moves more than
+    ``step_rad`` between neighbours (its own points kept)."""
+    p = np.asarray(path, dtype=float)
+    rows = [p[0]]
+    for a, b in itertools.pairwise(p):
+        n = max(1, math.ceil(float(np.max(np.abs(b - a))) / step_rad))
+        rows.extend(a + s * (b - a) for s in np.linspace(0.0, 1.0, n + 1)[1:])
+    return np.array(rows)
 
 
 def smoothstep5(tau: ArrayLike) -> tuple[Array, Array, Array]:

@@ -21,11 +21,6 @@ from services.kinematics.trajectory import Array
 MIN_CORNER_RAD = 0.01  # a rounding shorter than this gains nothing (and crowds the spline)
 
 
-def arc_lengths(rows: Array) -> Array:
-    """Joint-space arc length at every row of a path (0 at the first)."""
-    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(rows, axis=0), axis=1))])
-
-
 @dataclass(frozen=True)
 class Corner:
     """A rounded corner: the path's rows ``first``..``last`` (inclusive) give way to ``curve``."""

@@ -36,7 +36,7 @@ from services.common.modes import MotionKind
 from services.common.settings import MotionSettings
 from services.kinematics.cartesian import cartesian_path
 from services.kinematics.collision import CollisionChecker, Scene
-from services.kinematics.interpolation import wrap_toward
+from services.kinematics.interpolation import arc_lengths, densify, wrap_toward
 from services.kinematics.model import ArmModel, Kinematics, check_pose, pose_text
 from services.kinematics.trajectory import (
     Array,
@@ -45,7 +45,7 @@ from services.kinematics.trajectory import (
     LimitReport,
     verify_trajectory,
 )
-from services.motion.corners import Corner, arc_lengths, max_rounding, round_corner, with_corners
+from services.motion.corners import Corner, max_rounding, round_corner, with_corners
 from services.motion.sampling import PLANNERS, plan_path, seed_planning
 from services.motion.timing import time_parameterize
 
@@ -410,12 +410,7 @@ class MotionPlanner:
         return path
 
     def _densify(self, path: Array) -> Array:
-        rows = [path[0]]
-        for a, b in itertools.pairwise(path):
-            n = max(1, math.ceil(float(np.max(np.abs(b - a))) / self.config.spline_segment_rad))
-            for s in np.linspace(0.0, 1.0, n + 1)[1:]:
-                rows.append(a + s * (b - a))
-        return np.array(rows)
+        return densify(path, self.config.spline_segment_rad)
 
     def _timed(self, path: Array, method: str, *, notes: list[str]) -> JointTrajectory:
         c = self.config
@@ -510,11 +505,7 @@ CURVE_STEP_RAD = 0.04  # between a rounded corner's samples: the timed spline th
 def _tool_deviation(kin: Kinematics, curve: Array, original: Array) -> float:
     """How far the tool on ``curve`` comes from the tool on the ``original`` rows it replaces (the
     nearest of their tool points: an upper bound of the distance to the path between them)."""
-    fine = [original[0]]
-    for a, b in itertools.pairwise(original):  # the joint path between rows, finely enough for the tool
-        n = max(1, math.ceil(float(np.max(np.abs(b - a))) / DEVIATION_STEP_RAD))
-        fine += [a + u * (b - a) for u in np.linspace(0.0, 1.0, n + 1)[1:]]
-    ref = np.array([kin.fk(q)[:3, 3] for q in fine])
+    ref = np.array([kin.fk(q)[:3, 3] for q in densify(original, DEVIATION_STEP_RAD)])
     got = np.array([kin.fk(q)[:3, 3] for q in curve])
     return float(np.max(np.min(np.linalg.norm(got[:, None] - ref[None], axis=2), axis=1)))
 

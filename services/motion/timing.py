@@ -27,6 +27,7 @@ from numpy.typing import ArrayLike
 from ruckig import InputParameter, OutputParameter, Result, Ruckig, RuckigError, Synchronization, Trajectory
 
 from services.common.errors import InvalidInputError, TrajectoryLimitError
+from services.kinematics.interpolation import arc_lengths
 from services.kinematics.trajectory import Array, JointLimits, JointTrajectory, joint_path, verify_trajectory
 
 log = logging.getLogger("pickplace.motion.timing")
@@ -263,7 +264,7 @@ def toppra_path(
         return JointTrajectory.hold(joint_names, p[0])
     if p.shape[0] == 2:
         return ruckig_move(p[0], p[1], limits, joint_names, dt=dt, scale=scale)
-    chord = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+    chord = arc_lengths(p)
     geometric = toppra.SplineInterpolator(chord / chord[-1], p, bc_type="clamped")
     grid, sd = _toppra_profile(geometric, limits, scale, min(1000, max(100, 25 * p.shape[0])))
     profile = _ConstAccelProfile(grid, sd)

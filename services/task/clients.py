@@ -6,6 +6,7 @@ from collections.abc import Sequence
 
 import numpy as np
 from pickplace.v1 import (
+    common_pb2,
     grasp_pb2,
     grasp_pb2_grpc,
     motion_pb2,
@@ -341,7 +342,11 @@ class GrpcRobot:
             return None
         with rpc_errors():
             js = await self._stub.GetJointStates(robot_pb2.GetJointStatesRequest(), timeout=self._timeout)
-        return bool((js.digital_inputs >> (self._object_di - 1)) & 1)
+        return self._holds(js, self._object_di)
+
+    @staticmethod
+    def _holds(js: common_pb2.JointState, object_di: int) -> bool:
+        return bool((js.digital_inputs >> (object_di - 1)) & 1)  # bit n-1 is DI_n
 
     async def holding_on_passing(self, q: np.ndarray) -> bool | None:
         if self._object_di is None:
@@ -352,7 +357,7 @@ class GrpcRobot:
             with rpc_errors():
                 async for js in states:
                     if watch.passed(np.array(js.position)):
-                        return bool((js.digital_inputs >> (self._object_di - 1)) & 1)
+                        return self._holds(js, self._object_di)
         finally:
             states.cancel()
         raise RobotCommunicationError("the robot's joint state stream ended before the arm passed the pose")

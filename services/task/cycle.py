@@ -679,8 +679,9 @@ class Orchestrator:
             move.cancel()
             raise
         if check.done():
-            self._lift_check = None
-            if self._lift_check_empty(check):
+            empty = self._lift_check_empty(check)
+            self._drop_lift_check()
+            if empty:
                 # stopped whether the motion is still being handed over or flows on from what was
                 with contextlib.suppress(RobotError):
                     await self.robot.stop()
@@ -692,12 +693,11 @@ class Orchestrator:
     def _settle_lift_check(self) -> None:
         """The arm at rest past the lift: a check that saw it empty fails now; one that never saw the arm
         pass (its stream began late) is dropped, and the check that follows reads the sensor."""
-        check, self._lift_check = self._lift_check, None
-        if check is None:
-            return
-        if check.done() and self._lift_check_empty(check):
+        check = self._lift_check
+        empty = check is not None and check.done() and self._lift_check_empty(check)
+        self._drop_lift_check()
+        if empty:
             raise GraspFailureError(LIFT_CHECK_FAILED)
-        check.cancel()
 
     def _drop_lift_check(self) -> None:
         check, self._lift_check = self._lift_check, None

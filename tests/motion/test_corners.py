@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 from services.kinematics.collision import Scene
+from services.kinematics.interpolation import arc_lengths, densify
 from services.kinematics.model import load_arm
 from services.kinematics.trajectory import verify_trajectory
-from services.motion.corners import arc_lengths, max_rounding, round_corner, with_corners
+from services.motion.corners import max_rounding, round_corner, with_corners
 from services.motion.planner import BlendPart, MotionPlanner, blend
 
 Q_PICK = np.deg2rad([162.5, 22.6, 129.3, -61.9, -90.0, -107.5])
@@ -100,7 +101,9 @@ def test_rounded_corners_make_the_blend_faster_and_keep_the_tool_within_the_tole
     for a, b in itertools.pairwise(rounded):  # flowing on at every cut
         assert np.allclose(a.positions[-1], b.positions[0]) and np.max(np.abs(a.velocities[-1])) > 1e-3
     # every tool point of the motion lies within the tolerance of the path it was planned along
-    path = np.vstack([parts[0].path[:1], *(planner._densify(p.path)[1:] for p in parts)])
+    path = np.vstack(
+        [parts[0].path[:1], *(densify(p.path, planner.config.spline_segment_rad)[1:] for p in parts)]
+    )
     fine = np.vstack([a + u * (b - a) for a, b in itertools.pairwise(path) for u in np.linspace(0, 1, 20)])
     ref = np.array([planner.kin.fk(q)[:3, 3] for q in fine])
     got = np.array([planner.kin.fk(q)[:3, 3] for q in whole.positions[::3]])
