@@ -11,7 +11,8 @@ Times: the cycle and every state on the controller's clock (the feedback TimeSta
 which the simulator keeps in sim time whatever the machine's load), the compute of
 the critical path (DETECT + PLAN) in wall time beside it, and the bound: the
 time-optimal jerk-limited (ruckig) duration of the executed joint waypoints at the
-robot's limits, at rest at each, plus the gripper's actuation time per action.
+robot's limits, at rest at each, plus the gripper's actuation time per action (its release time for
+an open that lets go of the placed object).
 ``load`` runs that many busy processes beside the cell (always ended with the run).
 A trial whose harness fails (a scene that cannot be laid out, an exception) is
 recorded as a harness error with its reason, and the run goes on.
@@ -216,13 +217,16 @@ def execution_bound(
     joint_names: list[str],
     gripper_actions: int,
     actuation_s: float,
+    releases: int = 0,
+    release_s: float = 0.0,
 ) -> tuple[float, float, float]:
     """(total, motion, gripper) seconds: the executed joint waypoints timed time-optimally and
-    jerk-limited (ruckig) at ``limits``, at rest at each, plus ``actuation_s`` per gripper action."""
+    jerk-limited (ruckig) at ``limits``, at rest at each, plus ``actuation_s`` per gripper action, of
+    which ``releases`` (opens that let go of a held object) take ``release_s``."""
     from services.motion.timing import rest_to_rest
 
     motion = rest_to_rest(waypoints, limits, joint_names).duration if len(waypoints) >= 2 else 0.0
-    gripper = gripper_actions * actuation_s
+    gripper = (gripper_actions - releases) * actuation_s + releases * min(release_s, actuation_s)
     return motion + gripper, motion, gripper
 
 
@@ -394,6 +398,8 @@ class _TrialRunner:
             self.joint_names,
             outcome.gripper_actions,
             self.settings.gripper.actuation_time_s,
+            outcome.gripper_releases,
+            self.settings.gripper.release_time_s,
         )
         return TrialResult(
             seed=seed,

@@ -647,8 +647,11 @@ class RobotDriver(Supervision):
         return await execute_grasp(self, T_base_tool, approach_m, lift_m, speed_scale)
 
     # ------------------------------------------------------------------ gripper
-    async def set_gripper(self, close: bool) -> GripperState:
-        return await (self.gripper.close() if close else self.gripper.open())
+    async def set_gripper(self, close: bool, release: bool = False) -> GripperState:
+        """``release`` (an open only): answer once the jaws have let go of the held object."""
+        if close and release:
+            raise InvalidInputError("release applies to an open of the gripper, not to a close")
+        return await (self.gripper.close() if close else self.gripper.open(release))
 
 
 def _starts_moving(traj: JointTrajectory) -> bool:

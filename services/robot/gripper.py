@@ -19,7 +19,8 @@ class GripperState:
 class Gripper(Protocol):
     async def close(self) -> GripperState: ...
 
-    async def open(self) -> GripperState: ...
+    async def open(self, release: bool = False) -> GripperState:
+        """``release``: answer once the jaws have let go of what they held, not once fully open."""
 
     def state(self) -> GripperState: ...
 
@@ -36,14 +37,16 @@ class DigitalOutputGripper:
     program would. Every wait is on the controller's clock (the feedback TimeStamp), counted from
     the packet that reports the DO command done: a close ends on the object DI when one is mapped
     (or after ``EMPTY_CLOSE_FACTOR`` × ``actuation_time_s`` without it: closed on nothing), else after
-    ``actuation_time_s``; an open after ``actuation_time_s``. An open of jaws this gripper has
-    already opened sends nothing."""
+    ``actuation_time_s``; an open after ``actuation_time_s``, or, letting go of a held object, after
+    ``release_time_s`` (the jaws clear of it; they go on opening). An open of jaws this gripper has
+    already opened sends nothing and waits only for the rest of their stroke."""
 
     def __init__(self, client: ControllerLink, settings: GripperSettings, command_timeout_s: float = 10.0):
         self._client = client
         self._s = settings
         self._closed = False
         self._known_open = False  # opened by this object and not commanded since
+        self._opening_since_ms: float | None = None  # controller stamp the last open took effect at
         self._timeout = command_timeout_s
         self.opens_skipped = 0
 
@@ -56,12 +59,14 @@ class DigitalOutputGripper:
             return None
         return bool((fb.digital_inputs >> (self._s.object_di - 1)) & 1)
 
-    async def _set(self, close: bool) -> GripperState:
+    async def _set(self, close: bool, release: bool = False) -> GripperState:
         s = self._s
         if not close and self._known_open:
             self.opens_skipped += 1
+            await self._stroke_done()
             return self.state()
         self._known_open = False
+        self._opening_since_ms = None
         try:
             ids = []
             if s.open_do is not None and close:
@@ -81,8 +86,12 @@ class DigitalOutputGripper:
                     )
                 except TimeoutError:
                     pass  # no object in the jaws: reported through object_detected, decided by the caller
-            elif s.actuation_time_s > 0:  # jaw travel: nothing to observe but the controller's clock
-                await self._client.wait_controller_time(s.actuation_time_s, since_ms=done.timestamp_ms)
+            else:  # jaw travel: nothing to observe but the controller's clock
+                if not close:
+                    self._opening_since_ms = done.timestamp_ms
+                travel = min(s.release_time_s, s.actuation_time_s) if release else s.actuation_time_s
+                if travel > 0:
+                    await self._client.wait_controller_time(travel, since_ms=done.timestamp_ms)
         except RobotCommunicationError as exc:
             raise GripperError(f"gripper {'close' if close else 'open'} failed: {exc}") from exc
         self._known_open = not close
@@ -91,5 +100,19 @@ class DigitalOutputGripper:
     async def close(self) -> GripperState:
         return await self._set(True)
 
-    async def open(self) -> GripperState:
-        return await self._set(False)
+    async def open(self, release: bool = False) -> GripperState:
+        return await self._set(False, release)
+
+    async def _stroke_done(self) -> None:
+        """Wait out what is left of the last open's stroke (an open that answered on release), on the
+        controller's clock; at most one actuation time, whatever the clock did meanwhile (a reconnect)."""
+        since, fb = self._opening_since_ms, self._client.feedback
+        if since is None or fb is None:
+            return
+        left_s = min(self._s.actuation_time_s, (since - fb.timestamp_ms) / 1000.0 + self._s.actuation_time_s)
+        if left_s > 0:
+            try:
+                await self._client.wait_controller_time(left_s)
+            except RobotCommunicationError as exc:
+                raise GripperError(f"gripper open failed: {exc}") from exc
+        self._opening_since_ms = None

@@ -173,7 +173,7 @@ class RobotControllerServicer(robot_pb2_grpc.RobotControllerServicer):
     async def SetGripper(
         self, request: robot_pb2.SetGripperRequest, context: grpc.aio.ServicerContext
     ) -> robot_pb2.GripperResponse:
-        st = await self.driver.set_gripper(request.close)
+        st = await self.driver.set_gripper(request.close, release=request.release)
         return robot_pb2.GripperResponse(
             success=True,
             closed=st.closed,

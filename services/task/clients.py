@@ -332,9 +332,11 @@ class GrpcRobot:
             r = await self._stub.ExecuteTrajectory(req, timeout=self._timeout + traj.duration)
         return MoveOutcome(np.array(r.final_positions), r.execution_time, r.stopped_early)
 
-    async def gripper(self, close: bool) -> GripOutcome:
+    async def gripper(self, close: bool, release: bool = False) -> GripOutcome:
         with rpc_errors():
-            r = await self._stub.SetGripper(robot_pb2.SetGripperRequest(close=close), timeout=self._timeout)
+            r = await self._stub.SetGripper(
+                robot_pb2.SetGripperRequest(close=close, release=release), timeout=self._timeout
+            )
         return GripOutcome(r.closed, r.object_detected if self._object_di is not None else None)
 
     async def holding(self) -> bool | None:

@@ -544,8 +544,10 @@ class Orchestrator:
             self._progress = Progress(i, reached=True)
             if w.gripper is not None and not (in_motion and w.gripper is GripperCommand.OPEN):
                 close = w.gripper is GripperCommand.CLOSE
+                # letting go of what it set down, the arm may move away once the jaws are clear of it
+                release = not close and w.holding
                 g = await self._arm(
-                    self.robot.gripper(close), cfg.deadlines.gripper_s, f"gripper {w.gripper}"
+                    self.robot.gripper(close, release), cfg.deadlines.gripper_s, f"gripper {w.gripper}"
                 )
                 if close and g.object_detected is False and cfg.verify_grasp:
                     raise GraspFailureError(f"{w.name}: the gripper closed on nothing")

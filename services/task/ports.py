@@ -187,7 +187,8 @@ class RobotPort(Protocol):
         """``continues``: the trajectory ends in motion and the next one follows at once (answered
         when it is queued; ``final_q`` is then its last target)."""
 
-    async def gripper(self, close: bool) -> GripOutcome: ...
+    async def gripper(self, close: bool, release: bool = False) -> GripOutcome:
+        """``release`` (an open): answered once the jaws have let go of the held object, not fully open."""
 
     async def holding(self) -> bool | None:
         """Whether the gripper's object sensor sees the object (None: no sensor mapped)."""

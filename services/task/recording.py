@@ -33,6 +33,7 @@ class RecordingRobot:
         wps.append([float(v) for v in end])
         return res
 
-    async def gripper(self, close: bool) -> GripOutcome:
+    async def gripper(self, close: bool, release: bool = False) -> GripOutcome:
         self._out.gripper_actions += 1
-        return await self._robot.gripper(close)
+        self._out.gripper_releases += release
+        return await self._robot.gripper(close, release)

@@ -81,6 +81,7 @@ class PickOutcome:
     stage_wall_s: dict[str, float] = field(default_factory=dict)  # the same states in wall time
     executed_waypoints: list[list[float]] = field(default_factory=list)  # joints (rad) the arm went through
     gripper_actions: int = 0
+    gripper_releases: int = 0  # of those, opens that let go of a held object (answered when clear of it)
     # what the arm waited for to be computed outside DETECT and PLAN (a held rod measured before the
     # touch-down), on the orchestrator's clock and in wall time
     inline_compute_s: float = 0.0

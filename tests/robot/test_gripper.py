@@ -120,3 +120,18 @@ async def test_an_open_gripper_is_not_opened_again():
         assert sim.controller.commands_handled > handled  # a close is always sent
         await gripper.open()
         assert gripper.opens_skipped == 1  # after a close, an open is sent again
+
+
+async def test_a_release_answers_once_the_jaws_let_go_and_the_next_open_waits_out_the_stroke():
+    async with _cell(grip_after_s=0.1, object_di=None) as (sim, client, gripper):
+        await gripper.close()
+        opened_at = _first_stamp_with_do(client, 2)
+        state = await gripper.open(release=True)
+        assert client.feedback is not None and opened_at and not state.closed
+        released_ms = client.feedback.timestamp_ms - opened_at[0]
+        # clear of the object (release_time_s, default 0.12 s), well before the 0.4 s stroke is over
+        assert 120 <= released_ms < 400
+        handled = sim.controller.commands_handled
+        await gripper.open()  # the jaws are opening already: nothing sent, the rest of the stroke waited
+        assert sim.controller.commands_handled == handled and gripper.opens_skipped == 1
+        assert client.feedback.timestamp_ms - opened_at[0] >= 400

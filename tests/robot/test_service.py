@@ -84,6 +84,11 @@ async def test_control_rpcs(stub, service):
     assert st.robot_mode_name == "ENABLE" and st.enabled and st.robot_model == "nova5"
     g = await stub.SetGripper(robot_pb2.SetGripperRequest(close=True))
     assert g.closed and service.driver.gripper.state().closed
+    with pytest.raises(InvalidInputError, match="release applies to an open"), rpc_errors():
+        await stub.SetGripper(robot_pb2.SetGripperRequest(close=True, release=True))
+    assert service.driver.gripper.state().closed  # refused before anything was sent
+    g = await stub.SetGripper(robot_pb2.SetGripperRequest(close=False, release=True))
+    assert not g.closed and not service.driver.gripper.state().closed
 
 
 async def test_errors_cross_grpc_with_their_type(stub):

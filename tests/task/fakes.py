@@ -249,6 +249,7 @@ class FakeRobot:
     touch_at: float = 0.75
     touch_script: list[float] = field(default_factory=list)
     commands: list[tuple[object, ...]] = field(default_factory=list)
+    releases: list[bool] = field(default_factory=list)  # per gripper command: sent as a release
     clock_s: float = 0.0  # the controller's clock: advances by what the arm executes
     moves: int = 0
     continued: list[str] = field(default_factory=list)  # labels of the moves sent as continuing
@@ -294,8 +295,9 @@ class FakeRobot:
         self._guarded_calls += 1
         return share
 
-    async def gripper(self, close: bool) -> GripOutcome:
+    async def gripper(self, close: bool, release: bool = False) -> GripOutcome:
         self.commands.append(("gripper", GripperCommand.CLOSE if close else GripperCommand.OPEN))
+        self.releases.append(release)
         return GripOutcome(closed=close, object_detected=None)
 
     async def holding(self) -> bool | None:

@@ -113,6 +113,8 @@ async def test_the_arm_stops_only_where_physics_asks() -> None:
         ("gripper", CLOSE),
     ]
     assert cell.robot.commands.count(("gripper", OPEN)) == 2  # and the release
+    # only the open that lets go of the set-down rod answers once the jaws are clear of it
+    assert cell.robot.releases == [False, False, True]
 
 
 async def test_a_guarded_approach_is_paced_at_the_touch_down_speed() -> None:

@@ -20,7 +20,7 @@ class _Arm:
     async def execute(self, traj, force_guard_n: float = 0.0, continues: bool = False) -> MoveOutcome:  # type: ignore[no-untyped-def]
         return self.outcomes.pop(0)
 
-    async def gripper(self, close: bool) -> GripOutcome:
+    async def gripper(self, close: bool, release: bool = False) -> GripOutcome:
         return GripOutcome(closed=close, object_detected=None)
 
 

@@ -104,10 +104,12 @@ class ExecuteGraspRequest(_message.Message):
     def __init__(self, grasp_pose: _Optional[_Union[_common_pb2.Pose, _Mapping]] = ..., approach_distance: _Optional[float] = ..., lift_distance: _Optional[float] = ..., speed_scale: _Optional[float] = ...) -> None: ...
 
 class SetGripperRequest(_message.Message):
-    __slots__ = ("close",)
+    __slots__ = ("close", "release")
     CLOSE_FIELD_NUMBER: _ClassVar[int]
+    RELEASE_FIELD_NUMBER: _ClassVar[int]
     close: bool
-    def __init__(self, close: _Optional[bool] = ...) -> None: ...
+    release: bool
+    def __init__(self, close: _Optional[bool] = ..., release: _Optional[bool] = ...) -> None: ...
 
 class GripperResponse(_message.Message):
     __slots__ = ("success", "closed", "object_detected", "message")

@@ -14,6 +14,12 @@ class GripperSettings(Model):
     open_do: int | None = Field(2, ge=1, le=1000, description="DO that opens (None: close_do OFF opens)")
     tool_outputs: bool = Field(False, description="use the flange ToolDO instead of the cabinet DO")
     actuation_time_s: float = Field(0.4, ge=0, le=10)
+    # An open that lets go of a held object answers once the jaws are clear of it, not fully open: the
+    # arm may move away then. The twin's fingers open at 0.1 m/s each: 0.12 s is 12 mm a side. Capped
+    # at ``actuation_time_s``.
+    release_time_s: float = Field(
+        0.12, ge=0, le=10, description="controller time from an open until the jaws let go of the object"
+    )
     object_di: int | None = Field(None, ge=1, le=1000, description="DI that reads 1 when holding")
     stroke_m: float = Field(0.085, gt=0, le=0.3)
     # Flange → grasp centre (between the pads) along the flange z axis; shared by motion and the twin.
