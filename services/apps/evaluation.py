@@ -11,8 +11,10 @@ Times: the cycle and every state on the controller's clock (the feedback TimeSta
 which the simulator keeps in sim time whatever the machine's load), the compute of
 the critical path (DETECT + PLAN) in wall time beside it, and the bound: the
 time-optimal jerk-limited (ruckig) duration of the executed joint waypoints at the
-robot's limits, at rest at each, plus the gripper's actuation time per action (its release time for
-an open that lets go of the placed object).
+robot's limits, resting where the arm rested and flowing through the rest (each joint on its own,
+stopping only where it turns back: ``services.motion.bound``), plus the gripper's actuation time per
+action (its release time for an open that lets go of the placed object). Beside it, the same waypoints
+at rest at each (``bound_rest_to_rest_motion_s``).
 ``load`` runs that many busy processes beside the cell (always ended with the run).
 A trial whose harness fails (a scene that cannot be laid out, an exception) is
 recorded as a harness error with its reason, and the run goes on.
@@ -97,7 +99,9 @@ class TrialResult:
     bound_s: float | None = None  # time-optimal duration of what was executed (module docstring)
     bound_motion_s: float | None = None
     bound_gripper_s: float | None = None
+    bound_rest_to_rest_motion_s: float | None = None  # the motion resting at every waypoint
     executed_waypoints: list[list[float]] = field(default_factory=list)  # rad
+    executed_rests: list[bool] = field(default_factory=list)  # per waypoint: the arm rested there
     harness_error: str = ""
     scene_redraws: int = 0  # layouts the scene sampler drew again before every object fitted
     randomization: dict[str, float] = field(default_factory=dict)  # this trial's world (empty: nominal)
@@ -211,23 +215,44 @@ class EvalReport:
         return json.dumps({"summary": self.summary(), "trials": trials}, indent=2)
 
 
+@dataclass(frozen=True)
+class ExecutionBound:
+    """What the executed plan needs at least at the robot's limits (module docstring), in seconds."""
+
+    motion_s: float  # resting where the arm rested, flowing through the rest
+    gripper_s: float
+    rest_to_rest_motion_s: float  # resting at every waypoint (ruckig, all joints in step)
+
+    @property
+    def total_s(self) -> float:
+        return self.motion_s + self.gripper_s
+
+
 def execution_bound(
     waypoints: list[list[float]],
+    rests: list[bool],
     limits: JointLimits,
     joint_names: list[str],
     gripper_actions: int,
     actuation_s: float,
     releases: int = 0,
     release_s: float = 0.0,
-) -> tuple[float, float, float]:
-    """(total, motion, gripper) seconds: the executed joint waypoints timed time-optimally and
-    jerk-limited (ruckig) at ``limits``, at rest at each, plus ``actuation_s`` per gripper action, of
-    which ``releases`` (opens that let go of a held object) take ``release_s``."""
+) -> ExecutionBound:
+    """The executed joint waypoints timed time-optimally and jerk-limited (ruckig) at ``limits``, at rest
+    where ``rests`` says the arm rested (:func:`services.motion.bound.stop_to_stop_s`; every waypoint
+    when it says nothing), plus ``actuation_s`` per gripper action, of which ``releases`` (opens that
+    let go of a held object) take ``release_s``."""
+    from services.motion.bound import stop_to_stop_s
     from services.motion.timing import rest_to_rest
 
-    motion = rest_to_rest(waypoints, limits, joint_names).duration if len(waypoints) >= 2 else 0.0
+    if len(waypoints) < 2:
+        motion = each = 0.0
+    else:
+        each = rest_to_rest(waypoints, limits, joint_names).duration
+        flags = rests if len(rests) == len(waypoints) else [True] * len(waypoints)
+        motion = stop_to_stop_s(waypoints, flags, limits)
     gripper = (gripper_actions - releases) * actuation_s + releases * min(release_s, actuation_s)
-    return motion + gripper, motion, gripper
+    return ExecutionBound(motion, gripper, each)
 
 
 @contextlib.contextmanager
@@ -392,8 +417,9 @@ class _TrialRunner:
         d, w = outcome.stage_durations_s, outcome.stage_wall_s
         compute_wall = sum(w.get(k, 0.0) for k in COMPUTE_STAGES) + outcome.inline_compute_wall_s
         compute_ctrl = sum(d.get(k, 0.0) for k in COMPUTE_STAGES) + outcome.inline_compute_s
-        bound, bound_motion, bound_gripper = execution_bound(
+        bound = execution_bound(
             outcome.executed_waypoints,
+            outcome.executed_rests,
             self.limits,
             self.joint_names,
             outcome.gripper_actions,
@@ -419,10 +445,12 @@ class _TrialRunner:
             ground_truth_reasons=reasons,
             stage_durations_s={k: round(v, 4) for k, v in d.items()},
             stage_wall_s={k: round(v, 4) for k, v in w.items()},
-            bound_s=bound,
-            bound_motion_s=bound_motion,
-            bound_gripper_s=bound_gripper,
+            bound_s=bound.total_s,
+            bound_motion_s=bound.motion_s,
+            bound_gripper_s=bound.gripper_s,
+            bound_rest_to_rest_motion_s=bound.rest_to_rest_motion_s,
             executed_waypoints=outcome.executed_waypoints,
+            executed_rests=outcome.executed_rests,
             scene_redraws=cell.truth.scene_record().layout_redraws,
             randomization=_world_record(cell, seed),
         )

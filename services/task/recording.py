@@ -12,8 +12,8 @@ from services.task.states import PickOutcome
 
 class RecordingRobot:
     """The robot port, recording on the outcome what the cycle executed: the joint waypoints the arm
-    went through (each motion's start and its end, or where a guarded one stopped) and the gripper
-    actions."""
+    went through (each motion's start and its end, or where a guarded one stopped), whether it rested
+    at each, and the gripper actions."""
 
     def __init__(self, robot: RobotPort, out: PickOutcome):
         self._robot, self._out = robot, out
@@ -21,16 +21,20 @@ class RecordingRobot:
     def __getattr__(self, name: str) -> object:
         return getattr(self._robot, name)
 
-    async def execute(self, traj: JointTrajectory, *args: object, **kwargs: object) -> MoveOutcome:
-        res: MoveOutcome = await self._robot.execute(traj, *args, **kwargs)  # type: ignore[arg-type]
-        wps = self._out.executed_waypoints
+    async def execute(
+        self, traj: JointTrajectory, force_guard_n: float = 0.0, continues: bool = False
+    ) -> MoveOutcome:
+        res = await self._robot.execute(traj, force_guard_n, continues=continues)
+        wps, rests = self._out.executed_waypoints, self._out.executed_rests
         start = traj.positions[0]
         if not wps or not near(np.asarray(wps[-1]), start):  # within the tracking error: the same point
             wps.append([float(v) for v in start])
+            rests.append(True)  # it set off from elsewhere than the last move's end: from rest
         # a move that ran to its end went through its planned end (one that flows on returns while the arm
         # is still on its way, anywhere on it); one cut short ended where it stopped
         end = res.final_q if res.stopped_early else traj.positions[-1]
         wps.append([float(v) for v in end])
+        rests.append(res.stopped_early or not continues)
         return res
 
     async def gripper(self, close: bool, release: bool = False) -> GripOutcome:

@@ -80,6 +80,7 @@ class PickOutcome:
     stage_durations_s: dict[str, float] = field(default_factory=dict)  # on the orchestrator's clock
     stage_wall_s: dict[str, float] = field(default_factory=dict)  # the same states in wall time
     executed_waypoints: list[list[float]] = field(default_factory=list)  # joints (rad) the arm went through
+    executed_rests: list[bool] = field(default_factory=list)  # per waypoint: the arm came to rest there
     gripper_actions: int = 0
     gripper_releases: int = 0  # of those, opens that let go of a held object (answered when clear of it)
     # what the arm waited for to be computed outside DETECT and PLAN (a held rod measured before the

@@ -44,6 +44,10 @@ async def test_eval_two_trials_reports_ground_truth_on_the_controller_clock(tmp_
         assert r.bound_s is not None and 0 < r.bound_s < r.cycle_time_s
         assert r.bound_ratio is not None and r.bound_ratio > 1
         assert len(r.executed_waypoints) >= 4 and r.bound_gripper_s and r.bound_gripper_s > 0
+        # resting where the arm rested, flowing where it flowed: below the same waypoints one by one
+        assert len(r.executed_rests) == len(r.executed_waypoints) and not all(r.executed_rests)
+        assert r.bound_motion_s is not None and r.bound_rest_to_rest_motion_s is not None
+        assert r.bound_motion_s < r.bound_rest_to_rest_motion_s
     summary = report.summary()
     assert summary["success_rate"] == report.successes / 2 and summary["harness_errors"] == 0
     assert summary["bound_ratio_median"] is not None and summary["bound_ratio_median"] > 1

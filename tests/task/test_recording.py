@@ -47,4 +47,8 @@ async def test_flowing_moves_record_their_planned_ends_and_a_guarded_stop_where_
     await robot.execute(line(at_c, d), 0.6)  # planned from where the arm stood
     await robot.execute(line(stopped, a))
     assert np.allclose(out.executed_waypoints, [a, b, c, stopped, a])
-    assert out.gripper_actions == 1
+    # the arm flowed through b only: at rest where it set off, at c, where the guard stopped it and home
+    assert out.executed_rests == [True, False, True, True, True]
+    assert out.gripper_actions == 1 and out.gripper_releases == 0
+    await robot.gripper(False, release=True)
+    assert out.gripper_actions == 2 and out.gripper_releases == 1

@@ -1,0 +1,77 @@
+"""Lower bounds on how fast the arm can go through a list of joint waypoints at its limits (pure): what
+the eval holds a cycle against.
+
+A motion that starts and ends at rest and passes the waypoints in order without stopping between them
+is at least as long as each joint alone needs: free of the other joints and of the way between the
+waypoints, a joint still has to stop wherever it turns back, and it goes from turn to turn no faster than
+a time-optimal jerk-limited (ruckig) rest-to-rest move. The slowest joint's sum of those is the bound.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from itertools import pairwise
+
+import numpy as np
+from numpy.typing import ArrayLike
+from ruckig import InputParameter, Result, Ruckig, Trajectory
+
+from services.common.errors import InvalidInputError, TrajectoryLimitError
+from services.kinematics.trajectory import JointLimits, joint_path
+
+Array = np.ndarray
+STILL_RAD = 1e-9  # a joint that moves less than this between two waypoints stays where it is
+
+
+def turning_points(x: Array) -> Array:
+    """The values of one joint's waypoint sequence ``x`` where it starts, turns back and ends."""
+    moved = np.concatenate([[True], np.abs(np.diff(x)) > STILL_RAD])
+    v = np.asarray(x, dtype=float)[moved]
+    if v.size <= 2:
+        return v
+    step = np.sign(np.diff(v))
+    turns = np.flatnonzero(step[1:] != step[:-1]) + 1
+    return np.concatenate([[v[0]], v[turns], [v[-1]]])
+
+
+def one_joint_move_s(start: float, goal: float, v_max: float, a_max: float, j_max: float | None) -> float:
+    """Duration of the time-optimal rest-to-rest move of one joint (ruckig), jerk-limited when
+    ``j_max`` is given."""
+    if abs(goal - start) <= STILL_RAD:
+        return 0.0
+    inp = InputParameter(1)
+    inp.current_position, inp.target_position = [start], [goal]
+    inp.current_velocity = inp.current_acceleration = [0.0]
+    inp.target_velocity = inp.target_acceleration = [0.0]
+    inp.max_velocity, inp.max_acceleration = [v_max], [a_max]
+    if j_max is not None:
+        inp.max_jerk = [j_max]
+    tr = Trajectory(1)
+    if Ruckig(1).calculate(inp, tr) not in (Result.Working, Result.Finished):
+        raise TrajectoryLimitError(f"ruckig could not time a joint move {start} → {goal}")
+    return float(tr.duration)
+
+
+def through_waypoints_s(path: ArrayLike, limits: JointLimits, scale: float = 1.0) -> float:
+    """The least duration of a motion at ``limits`` (× ``scale``) from rest at the first waypoint of
+    ``path`` (N × dof, rad) to rest at its last, through the others in order (module docstring)."""
+    p = joint_path(path, limits.dof, "path")
+    jerk = limits.max_jerk
+    slowest = 0.0
+    for j in range(limits.dof):
+        turns = turning_points(p[:, j])
+        v, a = float(limits.max_velocity[j] * scale), float(limits.max_acceleration[j] * scale)
+        jm = float(jerk[j] * scale) if jerk is not None else None
+        total = sum(one_joint_move_s(float(x0), float(x1), v, a, jm) for x0, x1 in pairwise(turns))
+        slowest = max(slowest, total)
+    return slowest
+
+
+def stop_to_stop_s(path: ArrayLike, rests: Sequence[bool], limits: JointLimits, scale: float = 1.0) -> float:
+    """The least duration of a motion through ``path`` that rests at the waypoints ``rests`` flags (and
+    at both ends) and flows through the others: the sum of :func:`through_waypoints_s` over its runs."""
+    p = joint_path(path, limits.dof, "path")
+    if len(rests) != p.shape[0]:
+        raise InvalidInputError(f"{len(rests)} rest flags for {p.shape[0]} waypoints")
+    stops = sorted({0, p.shape[0] - 1, *(i for i, r in enumerate(rests) if r)})
+    return sum(through_waypoints_s(p[a : b + 1], limits, scale) for a, b in pairwise(stops))
