@@ -148,6 +148,12 @@ def print_report(report: EvalReport, console: Console) -> None:
         t.add_row(label, "-" if v is None else f"{v:.2f} s")
     share = s["compute_share_of_cycle"]
     t.add_row("compute share of a 1× cycle", "-" if share is None else f"{100 * share:.1f} %")
+    camera, own = s["camera_wall_median_s"], s["cell_compute_share_of_cycle"]
+    if camera is not None and own is not None and camera > 0:
+        t.add_row(
+            "of the compute: the twin camera's frames (median) / the rest's share",
+            f"{camera:.2f} s / {100 * own:.1f} %",
+        )
     ratio, ratio95 = s["bound_ratio_median"], s["bound_ratio_p95"]
     if ratio is not None and ratio95 is not None:
         t.add_row("measured / bound (median / p95)", f"{ratio:.2f} / {ratio95:.2f}")

@@ -14,7 +14,9 @@ time-optimal jerk-limited (ruckig) duration of the executed joint waypoints at t
 robot's limits, resting where the arm rested and flowing through the rest (each joint on its own,
 stopping only where it turns back: ``services.motion.bound``), plus the gripper's actuation time per
 action (its release time for an open that lets go of the placed object). Beside it, the same waypoints
-at rest at each (``bound_rest_to_rest_motion_s``).
+at rest at each (``bound_rest_to_rest_motion_s``). Of the compute, the twin camera rendering the
+frames the cycle waited for is told apart (``camera_wall_s``): on this machine's CPU it is most of
+DETECT, where a real camera streams its frames.
 ``load`` runs that many busy processes beside the cell (always ended with the run).
 A trial whose harness fails (a scene that cannot be laid out, an exception) is
 recorded as a harness error with its reason, and the run goes on.
@@ -93,6 +95,9 @@ class TrialResult:
     tilt_before_release_deg: float | None = None
     tilt_after_deg: float | None = None
     settle_s: float = 0.0  # sim seconds after the cycle before the placed object was judged
+    # of compute_wall_s: the twin's camera rendering the frames the cycle waited for, on this machine's
+    # CPU (a real camera streams its frames; the cell's own compute is the rest)
+    camera_wall_s: float = 0.0
     ground_truth_reasons: list[str] = field(default_factory=list)
     stage_durations_s: dict[str, float] = field(default_factory=dict)  # per state, controller clock
     stage_wall_s: dict[str, float] = field(default_factory=dict)  # per state, wall time
@@ -127,6 +132,8 @@ class EvalSummary(TypedDict):
     cycle_time_1x_median_s: float | None
     compute_wall_median_s: float | None
     compute_share_of_cycle: float | None
+    camera_wall_median_s: float | None  # of the compute: the twin camera's frames (TrialResult)
+    cell_compute_share_of_cycle: float | None  # the compute without them
     bound_median_s: float | None
     bound_ratio_median: float | None
     bound_ratio_p95: float | None
@@ -164,6 +171,7 @@ class EvalReport:
         ok = [r for r in ran if r.success]
         cycles = [r.cycle_time_s for r in ok]
         compute = [r.compute_wall_s for r in ran]
+        camera = [r.camera_wall_s for r in ran]
         cycle_1x = [r.cycle_time_1x_s for r in ran]
         ratios = [x for r in ok if (x := r.bound_ratio) is not None]
         bounds = [r.bound_s for r in ok if r.bound_s is not None]
@@ -187,6 +195,10 @@ class EvalReport:
             "compute_wall_median_s": statistics.median(compute) if compute else None,
             # what the arm waits for on a real-time cell, as a share of that cell's cycle
             "compute_share_of_cycle": (sum(compute) / sum(cycle_1x)) if sum(cycle_1x) > 0 else None,
+            "camera_wall_median_s": statistics.median(camera) if camera else None,
+            "cell_compute_share_of_cycle": (
+                (sum(compute) - sum(camera)) / sum(cycle_1x) if sum(cycle_1x) > 0 else None
+            ),
             "bound_median_s": statistics.median(bounds) if bounds else None,
             "bound_ratio_median": statistics.median(ratios) if ratios else None,
             "bound_ratio_p95": _p95(ratios),
@@ -390,8 +402,11 @@ class _TrialRunner:
                 try:
                     if i > 0:  # the cell starts in the scene of ``seed``
                         await cell.reset_scene(seed + i)
+                    camera_before = cell.vision.waited_capture_s if cell.vision is not None else 0.0
                     outcome = await runner.run_cycle(self.task)
                     res = await self.judge(cell, seed + i, outcome)
+                    if cell.vision is not None:
+                        res.camera_wall_s = cell.vision.waited_capture_s - camera_before
                 except Exception as exc:  # the trial's boundary: one broken trial never ends the run
                     log.warning("trial %d (seed %d): harness error: %s", i, seed + i, exc, exc_info=True)
                     res = _harness_error(seed + i, exc)

@@ -170,6 +170,9 @@ class VisionService(GrpcShell):
         self.paused_periods = 0  # live-loop periods given to a running cycle
         self.dropped_frames = 0  # live-loop frames not detected: a cycle started or asked meanwhile
         self._asked = 0  # Detect calls in progress: someone waits for them, the live loop does not
+        # wall seconds spent getting the frames someone waited for (a Detect, a held-rod measure): in
+        # the twin, its camera rendering them; the eval tells this apart from the cell's own compute
+        self.waited_capture_s = 0.0
         self._bus_frame: RGBDFrame | None = None
         self._bus_frame_event = asyncio.Event()
         self._subscription: Any = None
@@ -247,7 +250,10 @@ class VisionService(GrpcShell):
             self._capture_failures += 1
             raise
         self._capture_failures = 0
-        return frame, time.perf_counter() - t0
+        took = time.perf_counter() - t0
+        if prompt:
+            self.waited_capture_s += took
+        return frame, took
 
     async def _capture(self, prompt: bool = False) -> RGBDFrame:
         if self.camera is not None:

@@ -37,6 +37,8 @@ async def test_eval_two_trials_reports_ground_truth_on_the_controller_clock(tmp_
         assert r.success == (not r.ground_truth_reasons)
         assert r.success or (r.stage_reached and r.failure_reason)
         assert 0 < r.compute_controller_s < r.cycle_time_s and r.compute_wall_s > 0
+        # of the compute the arm waited for, the twin's camera rendering its frames is told apart
+        assert 0 < r.camera_wall_s < r.compute_wall_s
         # every state's controller time adds up to the cycle: the gap between cycles is in no state
         assert sum(r.stage_durations_s.values()) == pytest.approx(r.cycle_time_s, abs=0.01)
         assert SETTLE_S <= r.settle_s <= MAX_SETTLE_S  # judged after settling, at rest if it got there
@@ -50,6 +52,8 @@ async def test_eval_two_trials_reports_ground_truth_on_the_controller_clock(tmp_
         assert r.bound_motion_s < r.bound_rest_to_rest_motion_s
     summary = report.summary()
     assert summary["success_rate"] == report.successes / 2 and summary["harness_errors"] == 0
+    share, own = summary["compute_share_of_cycle"], summary["cell_compute_share_of_cycle"]
+    assert share is not None and own is not None and 0 < own < share
     assert summary["bound_ratio_median"] is not None and summary["bound_ratio_median"] > 1
     out = tmp_path / "eval.json"
     write_report(report, out)
