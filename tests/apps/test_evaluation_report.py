@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 from rich.console import Console
 
 from services.apps.eval_report import print_report, sensitivity, wilson_interval, worst_bin_rate
-from services.apps.evaluation import EvalReport, TrialResult
+from services.apps.evaluation import EvalReport, TrialResult, execution_bound
+from services.kinematics.robot_models import NOVA5
+from services.kinematics.trajectory import JointLimits
 
 
 def trial(seed: int, ok: bool, **record: float) -> TrialResult:
@@ -101,3 +104,15 @@ def test_a_nominal_report_has_no_sensitivity() -> None:
     report = EvalReport(task="stand-rod", trials=1, seed=0, successes=1, results=[trial(0, True)])
     s = report.summary()
     assert not s["randomized"] and s["sensitivity"] == {} and s["randomization_ranges"] == {}
+
+
+def test_the_bound_rests_where_the_arm_rested_and_counts_a_release_at_its_time():
+    limits, names = JointLimits.from_spec(NOVA5), list(NOVA5.joint_names)
+    home = np.deg2rad([180.0, 0.0, 90.0, 0.0, -90.0, 0.0])
+    wps = [(home + np.deg2rad([d, 0, 0, 0, 0, 0])).tolist() for d in (0, 30, 60)]
+    flowed = execution_bound(wps, [True, False, True], limits, names, 2, 0.4, releases=1, release_s=0.12)
+    stopped = execution_bound(wps, [], limits, names, 2, 0.4)  # no rests recorded: at rest at each
+    assert flowed.motion_s < stopped.motion_s == pytest.approx(stopped.rest_to_rest_motion_s)
+    assert flowed.rest_to_rest_motion_s == pytest.approx(stopped.rest_to_rest_motion_s)
+    assert flowed.gripper_s == pytest.approx(0.4 + 0.12) and stopped.gripper_s == pytest.approx(0.8)
+    assert flowed.total_s == pytest.approx(flowed.motion_s + flowed.gripper_s)
