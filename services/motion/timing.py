@@ -38,9 +38,10 @@ logging.getLogger("toppra").setLevel(logging.ERROR)
 DEFAULT_DT = 0.01  # s between knots (the driver resamples at its ServoJ period)
 _SAFETY_STEPS = (0.97, 0.9, 0.8, 0.65)
 # TOPP-RA's collocation can leave a grid point next to the end of the path at a near-zero path speed
-# (inside the clamped spline's last knot interval, where it curves hard): seeds 1068, 1103 and 1197 of
-# 200 crept 9.6 s over the last 0.1° of a 2.4 s move. A grid interval this long, and this large a share
-# of the whole, is timed again on a grid half as dense again, and the faster timing kept.
+# (inside the clamped spline's last knot interval, where it curves hard): seed 1068 of the eval crept
+# 9.6 s over the last 0.1° of a 2.4 s blend, and 1103 and 1197 alike (3 in 200). A grid interval this
+# long, and this large a share of the whole, is timed again on a grid half as dense again, and the
+# faster timing kept.
 STALL_INTERVAL_S = 0.25
 STALL_SHARE = 0.25
 
@@ -305,7 +306,7 @@ def toppra_path(
 
 
 def _stalls(profile: _ConstAccelProfile) -> bool:
-    """Whether one grid interval takes most of the motion (see ``STALL_INTERVAL_S``)."""
+    """Whether one grid interval takes a large share of the motion (see ``STALL_INTERVAL_S``)."""
     longest = float(np.max(profile.dt))
     return longest > STALL_INTERVAL_S and longest > STALL_SHARE * profile.duration
 
