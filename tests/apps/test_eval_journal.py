@@ -107,10 +107,12 @@ async def test_a_resumed_run_runs_only_the_trials_its_journal_lacks(tmp_path, mo
 
     resets: list[int] = []
     cycles = 0
+    vision = SimpleNamespace(waited_capture_s=5.0)  # the frames the cycles waited for, summed
 
     async def run_cycle(task: str) -> PickOutcome:
         nonlocal cycles
         cycles += 1
+        vision.waited_capture_s += 0.25 * cycles  # this cycle's camera time
         return PickOutcome(pick_id=f"p{cycles}", task=task, success=True)
 
     async def reset_scene(seed: int) -> None:
@@ -122,7 +124,7 @@ async def test_a_resumed_run_runs_only_the_trials_its_journal_lacks(tmp_path, mo
     monkeypatch.setattr(_TrialRunner, "judge", judge)
     runner = SimpleNamespace(run_cycle=run_cycle, _on_state=lambda s, m: None, orchestrator=SimpleNamespace())
     cell = SimpleNamespace(
-        task=SimpleNamespace(runner=runner), truth=SimpleNamespace(), reset_scene=reset_scene
+        task=SimpleNamespace(runner=runner), truth=SimpleNamespace(), reset_scene=reset_scene, vision=vision
     )
     report = EvalReport(task="stand-rod", trials=4, seed=10)
     trial = _TrialRunner(evaluation.Settings(), "stand-rod", JointLimits.from_spec(_spec()), [])
@@ -130,6 +132,8 @@ async def test_a_resumed_run_runs_only_the_trials_its_journal_lacks(tmp_path, mo
     journal.close()
 
     assert cycles == 2 and resets == [11, 13]
+    # each trial run now is charged the camera time of its own cycle, not the sum so far
+    assert [r.camera_wall_s for r in report.results if r.seed in (11, 13)] == [0.25, 0.5]
     assert [r.seed for r in report.results] == [10, 11, 12, 13] and report.successes == 3
     assert [r.seed for r in read_journal(path, HEADER)] == [10, 12, 11, 13]
 
