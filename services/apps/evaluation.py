@@ -263,7 +263,7 @@ def execution_bound(
         each = rest_to_rest(waypoints, limits, joint_names).duration
         flags = rests if len(rests) == len(waypoints) else [True] * len(waypoints)
         motion = stop_to_stop_s(waypoints, flags, limits)
-    gripper = (gripper_actions - releases) * actuation_s + releases * min(release_s, actuation_s)
+    gripper = (gripper_actions - releases) * actuation_s + releases * release_s
     return ExecutionBound(motion, gripper, each)
 
 
@@ -402,11 +402,10 @@ class _TrialRunner:
                 try:
                     if i > 0:  # the cell starts in the scene of ``seed``
                         await cell.reset_scene(seed + i)
-                    camera_before = cell.vision.waited_capture_s if cell.vision is not None else 0.0
+                    camera_before = _camera_s(cell)
                     outcome = await runner.run_cycle(self.task)
                     res = await self.judge(cell, seed + i, outcome)
-                    if cell.vision is not None:
-                        res.camera_wall_s = cell.vision.waited_capture_s - camera_before
+                    res.camera_wall_s = _camera_s(cell) - camera_before
                 except Exception as exc:  # the trial's boundary: one broken trial never ends the run
                     log.warning("trial %d (seed %d): harness error: %s", i, seed + i, exc, exc_info=True)
                     res = _harness_error(seed + i, exc)
@@ -440,7 +439,7 @@ class _TrialRunner:
             outcome.gripper_actions,
             self.settings.gripper.actuation_time_s,
             outcome.gripper_releases,
-            self.settings.gripper.release_time_s,
+            self.settings.gripper.release_wait_s,
         )
         return TrialResult(
             seed=seed,
@@ -487,6 +486,11 @@ def _world_record(cell: Cell, seed: int) -> dict[str, float]:
     except (AssertionError, AttributeError, OSError, RuntimeError):  # no engine (yet) or no sim: none
         return {}
     return scene.randomization if scene.seed == seed else {}
+
+
+def _camera_s(cell: Cell) -> float:
+    """Wall seconds the cell's camera has spent on frames someone waited for, so far."""
+    return cell.vision.waited_capture_s if cell.vision is not None else 0.0
 
 
 def _harness_error(seed: int, exc: BaseException) -> TrialResult:

@@ -89,7 +89,7 @@ class DigitalOutputGripper:
             else:  # jaw travel: nothing to observe but the controller's clock
                 if not close:
                     self._opening_since_ms = done.timestamp_ms
-                travel = min(s.release_time_s, s.actuation_time_s) if release else s.actuation_time_s
+                travel = s.release_wait_s if release else s.actuation_time_s
                 if travel > 0:
                     await self._client.wait_controller_time(travel, since_ms=done.timestamp_ms)
         except RobotCommunicationError as exc:

@@ -15,8 +15,7 @@ class GripperSettings(Model):
     tool_outputs: bool = Field(False, description="use the flange ToolDO instead of the cabinet DO")
     actuation_time_s: float = Field(0.4, ge=0, le=10)
     # An open that lets go of a held object answers once the jaws are clear of it, not fully open: the
-    # arm may move away then. The twin's fingers open at 0.1 m/s each: 0.12 s is 12 mm a side. Capped
-    # at ``actuation_time_s``.
+    # arm may move away then. The twin's fingers open at 0.1 m/s each: 0.12 s is 12 mm a side.
     release_time_s: float = Field(
         0.12, ge=0, le=10, description="controller time from an open until the jaws let go of the object"
     )
@@ -24,3 +23,8 @@ class GripperSettings(Model):
     stroke_m: float = Field(0.085, gt=0, le=0.3)
     # Flange → grasp centre (between the pads) along the flange z axis; shared by motion and the twin.
     tcp_offset_m: float = Field(0.16, gt=0, le=0.5)
+
+    @property
+    def release_wait_s(self) -> float:
+        """How long a release waits: ``release_time_s``, never longer than a full stroke."""
+        return min(self.release_time_s, self.actuation_time_s)
