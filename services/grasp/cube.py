@@ -1,7 +1,7 @@
 """Cube pick-and-place to colour-keyed drop zones (seed 004), a pure planning function.
 
 ``SAFE_HOME`` (joint) → ``PRE_GRASP`` (joint, open) → ``GRASP`` (linear, close) → ``LIFT`` (linear, up
-to the transport height, over any obstacle) → ``TRANSPORT`` (joint, above the drop zone) →
+to the transport height: over the seen boxes under the way, :func:`services.grasp.way.carry_height`) → ``TRANSPORT`` (joint, above the drop zone) →
 ``PLACE_ABOVE`` (linear) → ``PLACE`` (guarded linear descent) → ``RELEASE`` (hold, open) →
 ``RETRACT`` (linear, up).
 
@@ -15,6 +15,7 @@ batched closed-form IK — one branch along the straight pick lines and one alon
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -28,7 +29,9 @@ from services.grasp.geometry import pose, pose_path, rotation_z
 from services.grasp.plan import Grasp, Guard, HeldObject, PickPlan, Waypoint
 from services.grasp.reach import check_reach, track_paths
 from services.grasp.synthesis import CollisionCheck, ObjectSpec, synthesize, track_limits
+from services.grasp.way import carry_height
 from services.kinematics.analytic import fk
+from services.kinematics.collision import Box
 from services.kinematics.robot_models import RobotSpec
 
 Array = np.ndarray
@@ -79,9 +82,11 @@ def plan_pick_and_place(
     q_home: ArrayLike | None = None,
     collision_check: CollisionCheck | None = None,
     alternative: int = 0,
+    seen_boxes: Sequence[Box] = (),
 ) -> PickPlan:
     """The waypoint plan that sorts ``cube`` into its colour's drop zone; ``alternative`` = k > 0 takes
-    the k-th next-best feasible grasp/turn option (recovery: regrasp differently)."""
+    the k-th next-best feasible grasp/turn option (recovery: regrasp differently). ``seen_boxes``: what
+    else stands on the table; the cube is carried over those under its way (:func:`services.grasp.way.carry_height`)."""
     if not (isinstance(alternative, int) and alternative >= 0):
         raise InvalidInputError(f"alternative must be a non-negative integer, got {alternative!r}")
     cc = cfg.cubes
@@ -118,7 +123,9 @@ def plan_pick_and_place(
         T_pre = T_grasp.copy()
         T_pre[2, 3] += cfg.approach_distance_m
         T_lift = T_grasp.copy()
-        T_lift[2, 3] = max(cc.transport_height_m, T_grasp[2, 3] + cfg.lift_m)
+        hang = max(T_grasp[2, 3] - (c[2] - size / 2), cfg.gripper.fingertip_beyond_tcp_m)
+        carry = carry_height(cc.transport_height_m, cc.carry_clearance_m, c, zone, hang, seen_boxes)
+        T_lift[2, 3] = max(carry, T_grasp[2, 3] + cfg.lift_m)
         pick = np.vstack([pose_path(T_pre, T_grasp, step)[:-1], pose_path(T_grasp, T_lift, step)])
         for k in range(4):
             R_place = rotation_z(turn0 + k * math.pi / 2) @ T_grasp[:3, :3]

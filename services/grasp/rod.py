@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -48,7 +49,9 @@ from services.grasp.geometry import cylinder_lowest_z, lowest_gripper_z, pose, p
 from services.grasp.plan import Grasp, Guard, HeldObject, PickPlan, Waypoint
 from services.grasp.reach import check_reach, track_paths
 from services.grasp.synthesis import CollisionCheck, contact_model, track_limits, width_quality
+from services.grasp.way import carry_height
 from services.kinematics.analytic import fk
+from services.kinematics.collision import Box
 from services.kinematics.robot_models import RobotSpec
 
 Array = np.ndarray
@@ -109,12 +112,15 @@ def plan_pick_and_stand(
     collision_check: CollisionCheck | None = None,
     alternative: int = 0,
     other_branches: bool = False,
+    seen_boxes: Sequence[Box] = (),
 ) -> PickPlan:
     """The waypoint plan that picks ``rod`` and stands it upright at ``place_xy`` (default: config).
 
     ``alternative`` = k > 0 returns the k-th next-best feasible wrist option instead of the best
     (for recovery: replan with a different grasp or approach). ``other_branches``: when every option's
     cheapest IK branch collides, try their costlier branches (a last resort: longer, wider joint moves).
+    ``seen_boxes``: what else stands on the table; the standing rod is carried over those under its way
+    to the place (:func:`services.grasp.way.carry_height`).
     """
     if not (isinstance(alternative, int) and alternative >= 0):
         raise InvalidInputError(f"alternative must be a non-negative integer, got {alternative!r}")
@@ -163,7 +169,7 @@ def plan_pick_and_stand(
     skipped = 0
     colliding: list[tuple[_Option, list[tuple[float, Array]], int]] = []  # other branches, site's feasible
     for turn_xy in _turn_sites(grasp_pt, p_xy, cfg):
-        options = _build_options(a_h, center, grasp_pt, p_xy, lift, rod, cfg, turn_xy)
+        options = _build_options(a_h, center, grasp_pt, p_xy, lift, rod, cfg, turn_xy, seen_boxes)
         tried += options
         feasible = [o for o in options if not o.reason]
         if not feasible:
@@ -279,6 +285,7 @@ def _build_options(
     rod: RodObservation,
     cfg: GraspSettings,
     turn_xy: Array,
+    seen_boxes: Sequence[Box] = (),
 ) -> list[_Option]:
     rc, g = cfg.rod, cfg.gripper
     r, half = rod.diameter / 2, rod.length / 2
@@ -292,7 +299,7 @@ def _build_options(
     opening = rod.diameter + g.width_margin_m
     options: list[_Option] = []
     # fixed sample counts so every option's path has the same length (batched IK)
-    transit_len = 0.0
+    transit_len = drop_len = 0.0
     for s in (1.0, -1.0):
         R_grasp = tool_rotation(DOWN, np.cross(DOWN, s * a_h))
         T_grasp = pose(R_grasp, grasp_pt)
@@ -315,10 +322,12 @@ def _build_options(
                 T_place = pose(R_final, p_place)
                 T_above = T_place.copy()
                 T_above[2, 3] += rc.place_approach_m
-                # carry over the place position high enough that the rod's lower end clears the
-                # objects on the table (cubes are 5 cm), then come straight down to PLACE_ABOVE
+                # carried to above the place high enough that the rod's lower end clears what stands
+                # under the way there (the seen boxes: cubes), then straight down to PLACE_ABOVE
+                hang = T_above[2, 3] - (table + rc.place_approach_m)  # the tool tip above the lower end
+                carry = carry_height(T_above[2, 3], rc.carry_clearance_m, turn_xy, p_xy, hang, seen_boxes)
                 T_carry = T_above.copy()
-                T_carry[2, 3] = max(T_above[2, 3] + rc.carry_raise_m, T_lift[2, 3])
+                T_carry[2, 3] = max(carry, T_lift[2, 3])
                 T_low = T_place.copy()
                 T_low[2, 3] -= rc.guard_overtravel_m
                 T_back = T_place.copy()
@@ -339,6 +348,7 @@ def _build_options(
                     "RETRACT_UP": T_up,
                 }
                 transit_len = max(transit_len, float(np.linalg.norm(T_carry[:3, 3] - T_turn[:3, 3])))
+                drop_len = max(drop_len, float(T_carry[2, 3] - T_above[2, 3]))
                 o = _Option(s, eps, heading, poses, held)
                 turn = math.degrees(np.arccos(np.clip((np.trace(R_grasp.T @ R_final) - 1) / 2, -1.0, 1.0)))
                 if turn > MAX_TURN_DEG:  # the shorter way round is ambiguous near 180°
@@ -349,7 +359,7 @@ def _build_options(
         ("GRASP", "LIFT"): math.ceil(lift / step),
         ("LIFT", "REORIENT"): max(turn_n, math.ceil(float(np.linalg.norm(turn_xy - grasp_pt[:2])) / step)),
         ("REORIENT", "CARRY"): max(1, math.ceil(transit_len / step)),
-        ("CARRY", "PLACE_ABOVE"): max(1, math.ceil(max(rc.carry_raise_m, lift) / step)),
+        ("CARRY", "PLACE_ABOVE"): max(1, math.ceil(drop_len / step)),
         ("PLACE_ABOVE", "PLACE_LOW"): max(1, math.ceil((rc.place_approach_m + rc.guard_overtravel_m) / step)),
         ("PLACE_LOW", "PLACE"): 1,
         ("PLACE", "RETRACT"): max(1, math.ceil(rc.retreat_m / step)),

@@ -119,7 +119,8 @@ class GraspPlannerServicer(grasp_pb2_grpc.GraspPlannerServicer):
             length, diameter = rod_size(request, rod_cfg.length_m, rod_cfg.diameter_m)
             rod = RodObservation.create(list(request.center), list(request.axis), length, diameter)
             q_now = joints_or(request.current_joints, self.home, self.spec.dof, "current_joints")
-            check = MotionCollisionCheck.from_settings(self.settings, boxes_from_proto(request.obstacles))
+            boxes = boxes_from_proto(request.obstacles)
+            check = MotionCollisionCheck.from_settings(self.settings, boxes)
             cfg = self.cfg
             if request.HasField("grasp_offset"):
                 try:
@@ -143,6 +144,7 @@ class GraspPlannerServicer(grasp_pb2_grpc.GraspPlannerServicer):
                 collision_check=check,
                 alternative=request.alternative,
                 other_branches=request.other_ik_branches,
+                seen_boxes=boxes,
             )
             return plan_to_proto(plan, time.perf_counter() - t0, time.time_ns())
 
@@ -159,7 +161,8 @@ class GraspPlannerServicer(grasp_pb2_grpc.GraspPlannerServicer):
                 request.color,
             )
             q_now = joints_or(request.current_joints, self.home, self.spec.dof, "current_joints")
-            check = MotionCollisionCheck.from_settings(self.settings, boxes_from_proto(request.obstacles))
+            boxes = boxes_from_proto(request.obstacles)
+            check = MotionCollisionCheck.from_settings(self.settings, boxes)
             plan = plan_pick_and_place(
                 self.spec,
                 cube,
@@ -170,6 +173,7 @@ class GraspPlannerServicer(grasp_pb2_grpc.GraspPlannerServicer):
                 q_home=self.home,
                 collision_check=check,
                 alternative=request.alternative,
+                seen_boxes=boxes,
             )
             return plan_to_proto(plan, time.perf_counter() - t0, time.time_ns())
 

@@ -83,7 +83,7 @@ def cycle_config(settings: Settings) -> CycleConfig:
         jaw_clearance_m=settings.motion.padding_m,
         home_joints=tuple(float(np.deg2rad(v)) for v in home_deg) if home_deg is not None else None,
         max_joint_acceleration=tuple(float(a) for a in get_robot(settings.robot.model).max_acceleration),
-        home_rise_to_m=settings.grasp.cubes.transport_height_m,  # where carried objects clear the boxes
+        home_rise_to_m=t.home_rise_to_m,
         # as high as the pre-grasp: the plan's first move from there is short
         set_off_height_m=settings.grasp.approach_distance_m if t.set_off_before_planned else 0.0,
         straighten_from_offset_m=t.straighten_from_offset_m,

@@ -123,3 +123,27 @@ def test_alternative_takes_the_next_feasible_grasp_or_turn() -> None:
     assert second.notes["joint_motion_rad"] >= first.notes["joint_motion_rad"] - 1e-9 or (
         second.grasp.quality < first.grasp.quality
     )
+
+
+# the twin's obstacle, before the red and blue zones
+WALL = Box((0.30, 0.315, 0.0), (0.50, 0.365, 0.12), name="wall")
+
+
+def test_the_cube_is_carried_low_and_over_a_seen_box_under_its_way() -> None:
+    """The lift goes only as high as the wall under the way to the blue zone asks (its top + clearance +
+    the cube hanging below the tool tip); with no box there, or with the wall off the way to the green
+    zone, it stays at the configured least height."""
+    cc = CFG.cubes
+    blue, green = make_cube("blue", 5), make_cube("green", 5)
+    hang = SIZE / 2  # the tip at the cube's centre: its bottom half hangs below
+    bare = plan(blue).waypoint("LIFT").T_base_tool[2, 3]
+    assert bare == pytest.approx(max(cc.transport_height_m, SIZE / 2 + CFG.lift_m))
+    over = plan(blue, seen_boxes=[WALL]).waypoint("LIFT").T_base_tool[2, 3]
+    assert over == pytest.approx(WALL.max[2] + cc.carry_clearance_m + hang, abs=1e-6)
+    assert over > bare
+    assert plan(green, seen_boxes=[WALL]).waypoint("LIFT").T_base_tool[2, 3] == pytest.approx(bare)
+    # carried at that height, the cube's bottom clears the wall's top by the clearance
+    p = plan(blue, seen_boxes=[WALL])
+    T_tool_cube = invert_transform(p.waypoint("GRASP").T_base_tool) @ blue.T_base_cube
+    carried = p.waypoint("TRANSPORT").T_base_tool @ T_tool_cube
+    assert carried[2, 3] - SIZE / 2 == pytest.approx(WALL.max[2] + cc.carry_clearance_m, abs=1e-6)

@@ -361,3 +361,29 @@ def test_a_costlier_branch_keeps_the_elbow_bent_the_way_it_is_at_home() -> None:
     check = MotionCollisionCheck.from_settings(SETTINGS, SEED_1912_BOXES)
     p = plan(SEED_1912_ROD, collision_check=check, place_xy=[0.37609, 0.03061], other_branches=True)
     assert all(np.sign(w.q[2]) == np.sign(HOME[2]) for w in p.waypoints)
+
+
+def test_the_standing_rod_is_carried_over_a_seen_box_under_its_way_only() -> None:
+    """With nothing under the way to the place, the rod comes at the height it turned at (or at the
+    place approach, when higher) and goes straight down; a box under the way lifts the carry until the
+    rod's lower end clears the box's top by the clearance; a box off the way changes nothing."""
+    rod = RodObservation.create([0.50, 0.15, D / 2], [0.0, 1.0, 0.0], L, D)
+    px, py = CFG.rod.place_xy_m  # type: ignore[misc]
+
+    def carry_and_lower_end(p: PickPlan) -> tuple[float, float]:
+        T_tool_rod = invert_transform(p.waypoint("GRASP").T_base_tool) @ T_base_rod(rod)
+        T_rod = p.waypoint("CARRY").T_base_tool @ T_tool_rod
+        low = min((T_rod[:3, 3] + k * L / 2 * T_rod[:3, 2] for k in (1, -1)), key=lambda e: e[2])
+        return float(p.waypoint("CARRY").T_base_tool[2, 3]), float(low[2])
+
+    bare = plan(rod)
+    z_bare, _ = carry_and_lower_end(bare)
+    lift, above = bare.waypoint("LIFT").T_base_tool[2, 3], bare.waypoint("PLACE_ABOVE").T_base_tool[2, 3]
+    assert z_bare == pytest.approx(max(lift, above))
+    # a 12 cm box just short of the place, where the rod comes from
+    box = Box((px - 0.02, py + 0.06, 0.0), (px + 0.02, py + 0.10, 0.12), name="box")
+    z_box, low_box = carry_and_lower_end(plan(rod, seen_boxes=[box]))
+    assert low_box == pytest.approx(box.max[2] + CFG.rod.carry_clearance_m, abs=1e-6)
+    assert z_box > z_bare
+    far = Box((px - 0.02, -0.40, 0.0), (px + 0.02, -0.36, 0.12), name="far")  # the other side of the place
+    assert carry_and_lower_end(plan(rod, seen_boxes=[far]))[0] == pytest.approx(z_bare)

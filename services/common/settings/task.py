@@ -48,6 +48,10 @@ class TaskSettings(Model):
     # contact 12 mm past nominal; the 10 mm overtravel ended 2.2 mm above the table and the rod was let go
     # in the air.
     touch_down_extension_m: float = Field(0.01, ge=0, le=0.05)
+    # After an aborted cycle or a restart nothing is known of the table: the arm first rises straight up to
+    # this tool-tip height, above every box of the cell, before its joint move home (sorting cubes, a joint
+    # move home from beside the wall swept through it: alarm 117).
+    home_rise_to_m: float = Field(0.25, ge=0, le=1.0)
     # After a cycle the arm stays where its retract leaves the camera's view of the pick zone clear (or
     # goes only as far toward the safe home as that takes), decided by projecting its collision model
     # into the camera (sim.twin.camera) against the pick zone (sim.twin.scene) raised to this height.
