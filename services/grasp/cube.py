@@ -1,9 +1,9 @@
 """Cube pick-and-place to colour-keyed drop zones (seed 004), a pure planning function.
 
 ``SAFE_HOME`` (joint) → ``PRE_GRASP`` (joint, open) → ``GRASP`` (linear, close) → ``LIFT`` (linear, up
-to the transport height: over the seen boxes under the way, :func:`services.grasp.way.carry_height`) → ``TRANSPORT`` (joint, above the drop zone) →
-``PLACE_ABOVE`` (linear) → ``PLACE`` (guarded linear descent) → ``RELEASE`` (hold, open) →
-``RETRACT`` (linear, up).
+to the transport height, over the seen boxes under the way: :func:`services.grasp.way.carry_height`) →
+``TRANSPORT`` (joint, above the drop zone) → ``PLACE_ABOVE`` (linear) → ``PLACE`` (guarded linear
+descent) → ``RELEASE`` (hold, open) → ``RETRACT`` (linear, up).
 
 Grasps come from the antipodal synthesis (:mod:`synthesis`) restricted to near top-down
 approaches, best quality first. For each grasp the cube may be set down turned by any multiple
@@ -86,7 +86,8 @@ def plan_pick_and_place(
 ) -> PickPlan:
     """The waypoint plan that sorts ``cube`` into its colour's drop zone; ``alternative`` = k > 0 takes
     the k-th next-best feasible grasp/turn option (recovery: regrasp differently). ``seen_boxes``: what
-    else stands on the table; the cube is carried over those under its way (:func:`services.grasp.way.carry_height`)."""
+    else stands on the table; the cube is carried over those under its way
+    (:func:`services.grasp.way.carry_height`)."""
     if not (isinstance(alternative, int) and alternative >= 0):
         raise InvalidInputError(f"alternative must be a non-negative integer, got {alternative!r}")
     cc = cfg.cubes

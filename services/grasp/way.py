@@ -22,9 +22,9 @@ def carry_height(
 ) -> float:
     """The tool tip's height for carrying from above ``start_xy`` to above ``end_xy``: ``minimum_m`` at
     least, and ``clearance_m`` above the top of every box under the way with what hangs ``hang_m`` below
-    the tip (a carried cube, a rod standing in the jaws, the fingertips). Under the way: any point of the box's footprint within
-    ``WAY_MARGIN_M`` of the ring sector the tool sweeps about the base (the bearings between the two ends,
-    the shorter way round; the radii between theirs)."""
+    the tip (a carried cube, a rod standing in the jaws, the fingertips). Under the way: any point of
+    the box's footprint within ``WAY_MARGIN_M`` of the ring sector the tool sweeps about the base (the
+    bearings between the two ends, the shorter way round; the radii between theirs)."""
     a0, a1 = math.atan2(start_xy[1], start_xy[0]), math.atan2(end_xy[1], end_xy[0])
     sweep = (a1 - a0 + math.pi) % (2 * math.pi) - math.pi  # the shorter way round
     r0, r1 = float(np.hypot(*start_xy[:2])), float(np.hypot(*end_xy[:2]))
@@ -34,12 +34,7 @@ def carry_height(
         top = box.max[2] + clearance_m + hang_m
         if top <= height:
             continue
-        xs = np.linspace(
-            box.min[0], box.max[0], max(2, math.ceil((box.max[0] - box.min[0]) / FOOTPRINT_STEP_M) + 1)
-        )
-        ys = np.linspace(
-            box.min[1], box.max[1], max(2, math.ceil((box.max[1] - box.min[1]) / FOOTPRINT_STEP_M) + 1)
-        )
+        xs, ys = (_samples(box.min[k], box.max[k]) for k in (0, 1))
         px, py = (v.ravel() for v in np.meshgrid(xs, ys))
         r = np.hypot(px, py)
         # the bearing from the start, the way the tool swings; the margin as an angle at each point's radius
@@ -50,3 +45,8 @@ def carry_height(
         if bool(np.any(within)):
             height = top
     return height
+
+
+def _samples(lo: float, hi: float) -> Array:
+    """Points from ``lo`` to ``hi``, both ends included, at most ``FOOTPRINT_STEP_M`` apart."""
+    return np.linspace(lo, hi, max(2, math.ceil((hi - lo) / FOOTPRINT_STEP_M) + 1))
