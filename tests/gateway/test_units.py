@@ -256,6 +256,38 @@ async def test_read_cache_expires_and_clears():
     assert (cache.hits, cache.misses) == (1, 4)
 
 
+async def test_a_value_read_while_the_cache_was_cleared_is_not_kept():
+    """A summary read that began before a write and ended after the writer cleared the cache is answered
+    but not kept: the next read computes again and sees the write (a cached stale "no picks" failed the
+    operator panel's test on a loaded machine)."""
+    import asyncio
+
+    from gateway.cache import ReadCache
+
+    cache = ReadCache(ttl_s=2.0, clock=lambda: 0.0)  # never expires by time
+    stored = [0]  # picks in the "database"
+    reading, written = asyncio.Event(), asyncio.Event()
+
+    async def slow_summary() -> int:
+        seen = stored[0]  # the query reads before the write commits ...
+        reading.set()
+        await written.wait()  # ... and answers after the writer cleared the cache
+        return seen
+
+    async def quick_summary() -> int:
+        return stored[0]
+
+    read = asyncio.create_task(cache.get("summary", slow_summary))
+    await reading.wait()
+    stored[0] = 1
+    cache.clear()  # the pick writer, once the pick is stored
+    written.set()
+    assert await read == 0  # answered as it was read
+    assert await cache.get("summary", quick_summary) == 1  # not kept: read again
+    assert await cache.get("summary", slow_summary) == 1  # and this one is kept
+    assert (cache.hits, cache.misses) == (1, 2)
+
+
 def test_metrics_multiprocess_mode_aggregates_every_process(tmp_path):
     """With PROMETHEUS_MULTIPROC_DIR set, each service process writes its values there and one /metrics
     shows them all (the env var must be set before prometheus_client is imported: subprocesses)."""
