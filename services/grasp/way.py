@@ -7,6 +7,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from services.common.frames import wrap_to_pi
 from services.kinematics.collision import Box
 
 Array = np.ndarray
@@ -26,7 +27,7 @@ def carry_height(
     the box's footprint within ``WAY_MARGIN_M`` of the ring sector the tool sweeps about the base (the
     bearings between the two ends, the shorter way round; the radii between theirs)."""
     a0, a1 = math.atan2(start_xy[1], start_xy[0]), math.atan2(end_xy[1], end_xy[0])
-    sweep = (a1 - a0 + math.pi) % (2 * math.pi) - math.pi  # the shorter way round
+    sweep = float(wrap_to_pi(a1 - a0))  # the shorter way round
     r0, r1 = float(np.hypot(*start_xy[:2])), float(np.hypot(*end_xy[:2]))
     r_lo, r_hi = min(r0, r1) - WAY_MARGIN_M, max(r0, r1) + WAY_MARGIN_M
     height = float(minimum_m)
@@ -38,7 +39,7 @@ def carry_height(
         px, py = (v.ravel() for v in np.meshgrid(xs, ys))
         r = np.hypot(px, py)
         # the bearing from the start, the way the tool swings; the margin as an angle at each point's radius
-        rel = (np.arctan2(py, px) - a0 + math.pi) % (2 * math.pi) - math.pi
+        rel = wrap_to_pi(np.arctan2(py, px) - a0)
         along = rel * math.copysign(1.0, sweep) if sweep else np.abs(rel)
         slack = WAY_MARGIN_M / np.maximum(r, WAY_MARGIN_M)
         within = (r >= r_lo) & (r <= r_hi) & (along >= -slack) & (along <= abs(sweep) + slack)
