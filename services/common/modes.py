@@ -28,6 +28,13 @@ class MotionKind(enum.StrEnum):
     HOLD = "hold"  # no motion: act where the arm stands (a gripper command at touch height)
 
 
+class CubeRelease(enum.StrEnum):
+    """How a sorted cube leaves the jaws over its drop zone."""
+
+    DROP = "drop"  # let go a little above the highest table the cell allows for: no touch-down, no rest above
+    TOUCH_DOWN = "touch-down"  # set down by a guarded descent that stops on the wrist force, then let go
+
+
 class GripperCommand(enum.StrEnum):
     OPEN = "open"
     CLOSE = "close"

@@ -23,7 +23,7 @@ from numpy.typing import ArrayLike
 
 from services.common.errors import CollisionError, IKFailureError, InvalidInputError, PlanningError
 from services.common.frames import check_transform, finite_vector, invert_transform
-from services.common.modes import GripperCommand, MotionKind, TaskKind
+from services.common.modes import CubeRelease, GripperCommand, MotionKind, TaskKind
 from services.common.settings import GraspSettings
 from services.grasp.geometry import pose, pose_path, rotation_z
 from services.grasp.plan import Grasp, Guard, HeldObject, PickPlan, Waypoint
@@ -46,6 +46,7 @@ class _Option:
     pick: Array  # tool poses PRE_GRASP → GRASP → LIFT
     place: Array  # tool poses TRANSPORT → PLACE_ABOVE → (guard) → PLACE → RETRACT
     held: HeldObject
+    i_place: int  # the PLACE pose's index in ``place``
 
 
 @dataclass(frozen=True)
@@ -117,6 +118,7 @@ def plan_pick_and_place(
     T_tool_flange = invert_transform(T_flange_tool)
     step = cfg.path_step_m
     turn0 = math.atan2(zone[1], zone[0]) - math.atan2(c[1], c[0])  # follow J1's swing
+    drops = cc.release is CubeRelease.DROP
     options: list[_Option] = []
     for g in grasps:
         T_grasp = g.T_base_tool
@@ -131,7 +133,8 @@ def plan_pick_and_place(
         for k in range(4):
             R_place = rotation_z(turn0 + k * math.pi / 2) @ T_grasp[:3, :3]
             bottom_to_centre = np.array([0.0, 0.0, size / 2])
-            centre = np.array([zone[0], zone[1], table + cc.place_clearance_m]) + bottom_to_centre
+            clearance = cc.drop_clearance_m if drops else cc.place_clearance_m
+            centre = np.array([zone[0], zone[1], table + clearance]) + bottom_to_centre
             # the carried cube keeps its pose in the tool: put its centre over the zone
             p_tool = centre - R_place @ T_tool_cube[:3, 3]
             T_place = pose(R_place, p_tool)
@@ -143,14 +146,19 @@ def plan_pick_and_place(
             T_low[2, 3] -= cc.guard_overtravel_m + cc.place_clearance_m
             T_up = T_place.copy()
             T_up[2, 3] += cc.retract_up_m
-            place = np.vstack(
-                [
+            down = (
+                # a drop: straight down to where the jaws let go
+                [pose_path(T_transport, T_above, step)[:-1], pose_path(T_above, T_place, step)[:-1]]
+                if drops
+                # a touch-down: the guard may take it down to T_low, the release is at T_place
+                else [
                     pose_path(T_transport, T_above, step)[:-1],
                     pose_path(T_above, T_low, step)[:-1],
                     pose_path(T_low, T_place, step, 1)[:-1],
-                    pose_path(T_place, T_up, step),
                 ]
             )
+            i_place = sum(len(p) for p in down)
+            place = np.vstack([*down, pose_path(T_place, T_up, step)])
             poses = {
                 "PRE_GRASP": T_pre,
                 "GRASP": T_grasp,
@@ -161,7 +169,7 @@ def plan_pick_and_place(
                 "RETRACT": T_up,
             }
             held = HeldObject("box", T_tool_cube, size=(size, size, size))
-            options.append(_Option(g, poses, pick, place, held))
+            options.append(_Option(g, poses, pick, place, held, i_place))
 
     n_pick = max(len(o.pick) for o in options)
     n_place = max(len(o.place) for o in options)
@@ -199,9 +207,7 @@ def plan_pick_and_place(
         if skipped < alternative:
             skipped += 1
             continue
-        return _assemble(
-            spec, cube, zone, o.grasp, o.poses, q_pick, q_place, home, o.held, cost, cfg, T_flange_tool
-        )
+        return _assemble(spec, cube, zone, o, q_pick, q_place, home, cost, cfg, T_flange_tool)
     if skipped:
         raise PlanningError(
             f"alternative {alternative} requested but only {skipped} feasible option(s) exist"
@@ -243,35 +249,29 @@ def _assemble(
     spec: RobotSpec,
     cube: CubeObservation,
     zone: Array,
-    grasp: Grasp,
-    P: dict[str, Array],
+    o: _Option,
     q_pick: Array,
     q_place: Array,
     home: Array,
-    held: HeldObject,
     cost: float,
     cfg: GraspSettings,
     T_flange_tool: Array,
 ) -> PickPlan:
     cc = cfg.cubes
-    step = cfg.path_step_m
-    n_pre = len(pose_path(P["PRE_GRASP"], P["GRASP"], step)) - 1
-    n_above = len(pose_path(P["TRANSPORT"], P["PLACE_ABOVE"], step)) - 1
-    n_low = (
-        len(
-            pose_path(
-                P["PLACE_ABOVE"], _lowered(P["PLACE"], cc.guard_overtravel_m + cc.place_clearance_m), step
-            )
+    P, grasp, held, i_place = o.poses, o.grasp, o.held, o.i_place
+    n_pre = len(pose_path(P["PRE_GRASP"], P["GRASP"], cfg.path_step_m)) - 1
+    n_above = len(pose_path(P["TRANSPORT"], P["PLACE_ABOVE"], cfg.path_step_m)) - 1
+    # a drop needs no guard: the arm flows down through PLACE_ABOVE and rests only where the jaws open
+    guard = (
+        None
+        if cc.release is CubeRelease.DROP
+        else Guard(
+            cc.touch_force_drop_n,
+            cc.guard_overtravel_m + cc.place_clearance_m,
+            cc.guard_speed_m_s,
+            slow_band_m=cc.guard_slow_band_m,
+            approach_speed_m_s=cc.guard_approach_speed_m_s,
         )
-        - 1
-    )
-    i_place = n_above + n_low + 1
-    guard = Guard(
-        cc.touch_force_drop_n,
-        cc.guard_overtravel_m + cc.place_clearance_m,
-        cc.guard_speed_m_s,
-        slow_band_m=cc.guard_slow_band_m,
-        approach_speed_m_s=cc.guard_approach_speed_m_s,
     )
     T_home = fk(spec, home) @ T_flange_tool
     wps = (

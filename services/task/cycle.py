@@ -546,6 +546,11 @@ class Orchestrator:
                 close = w.gripper is GripperCommand.CLOSE
                 # letting go of what it set down, the arm may move away once the jaws are clear of it
                 release = not close and w.holding
+                if release and cfg.verify_grasp and not (i > 0 and plan.waypoints[i - 1].guard_force_n > 0):
+                    # no touch-down felt the object (a dropped cube): the cell reports it placed only
+                    # if the jaws still hold it as they let go
+                    self._settle_lift_check()
+                    await self._check_holding(f"before the release at {w.name}")
                 g = await self._arm(
                     self.robot.gripper(close, release), cfg.deadlines.gripper_s, f"gripper {w.gripper}"
                 )

@@ -17,6 +17,7 @@ from services.apps.evaluation import (
     run_eval,
     write_report,
 )
+from services.common.modes import CubeRelease
 from tests.apps.conftest import cell_settings
 from tests.polling import until
 
@@ -88,6 +89,18 @@ async def test_a_seeds_outcome_and_plan_do_not_depend_on_the_cpu_load(tmp_path):
         # and the same motion in all: where a guarded move felt its contact varies by a millimetre
         assert ld.bound_motion_s == pytest.approx(q.bound_motion_s, rel=0.03)
     assert quiet.successes == 2  # seeds 1000 and 1001 stand (200/200 from seed 1000 in `pickplace eval`)
+
+
+async def test_sorted_cubes_are_dropped_into_their_zones(tmp_path):
+    """Sort-cubes in randomized worlds (table heights ±5 mm): the jaws let go with the cube's bottom
+    12 mm above the nominal table (`grasp.cubes.release: drop`), and the twin finds each cube within
+    2.5 cm of its zone's centre, at rest."""
+    s = cell_settings(tmp_path, sim={"speed": 3.0})
+    assert s.grasp.cubes.release is CubeRelease.DROP
+    report = await run_eval(s, trials=2, seed=1000, task="sort-cubes", progress=False)
+    for r in report.results:
+        assert r.success, (r.seed, r.failure_reason, r.ground_truth_reasons)
+        assert r.executed_rests[-1] and r.bound_s is not None and r.bound_ratio is not None
 
 
 def test_busy_processes_are_started_and_always_ended():

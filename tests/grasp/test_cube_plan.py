@@ -7,7 +7,7 @@ import pytest
 
 from services.common.errors import IKFailureError, InvalidInputError
 from services.common.frames import invert_transform
-from services.common.modes import GripperCommand
+from services.common.modes import CubeRelease, GripperCommand
 from services.common.settings import load_settings
 from services.grasp.collision import MotionCollisionCheck
 from services.grasp.cube import CubeObservation, drop_zone, plan_pick_and_place
@@ -47,7 +47,10 @@ def test_each_colour_goes_to_its_drop_zone(color: str, seed: int) -> None:
     T_tool_cube = invert_transform(p.waypoint("GRASP").T_base_tool) @ cube.T_base_cube
     placed = p.waypoint("PLACE").T_base_tool @ T_tool_cube
     assert np.allclose(placed[:2, 3], zone, atol=1e-9)  # centred over the zone
-    assert placed[2, 3] - SIZE / 2 == pytest.approx(CFG.table_z_m + CFG.cubes.place_clearance_m)
+    # dropped (the default): let go above the highest table, with no guarded touch-down before it
+    assert CFG.cubes.release is CubeRelease.DROP
+    assert placed[2, 3] - SIZE / 2 == pytest.approx(CFG.table_z_m + CFG.cubes.drop_clearance_m)
+    assert not any(w.guarded for w in p.waypoints)
     assert placed[:3, 2] @ np.array([0.0, 0.0, 1.0]) > 1 - 1e-9  # set down upright
     assert p.names() == [
         "SAFE_HOME",
@@ -68,6 +71,26 @@ def test_each_colour_goes_to_its_drop_zone(color: str, seed: int) -> None:
     assert p.waypoint("LIFT").T_base_tool[2, 3] >= CFG.cubes.transport_height_m
     for w in p.waypoints:
         assert SPEC.within_limits(w.q)
+        assert np.allclose(fk(SPEC, w.q) @ T_FLANGE_TOOL, w.T_base_tool, atol=1e-6), w.name
+
+
+def test_a_touch_down_sets_the_cube_down_guarded_and_lets_go_just_above_the_table() -> None:
+    cfg = CFG.model_copy(update={"cubes": CFG.cubes.model_copy(update={"release": CubeRelease.TOUCH_DOWN})})
+    cube = make_cube("blue", 2)
+    p = plan_pick_and_place(SPEC, cube, HOME, cfg, T_FLANGE_TOOL, STROKE, q_home=HOME)
+    dropped = plan(cube)
+    T_tool_cube = invert_transform(p.waypoint("GRASP").T_base_tool) @ cube.T_base_cube
+    placed = p.waypoint("PLACE").T_base_tool @ T_tool_cube
+    assert placed[2, 3] - SIZE / 2 == pytest.approx(CFG.table_z_m + CFG.cubes.place_clearance_m)
+    guard = p.waypoint("PLACE").guard
+    assert guard is not None and guard.force_drop_n == CFG.cubes.touch_force_drop_n
+    assert guard.overtravel_m == pytest.approx(CFG.cubes.guard_overtravel_m + CFG.cubes.place_clearance_m)
+    assert [w.name for w in p.waypoints if w.guarded] == ["PLACE"]
+    # the same grasp and turn either way; only the height the jaws open at differs
+    assert np.allclose(p.waypoint("GRASP").q, dropped.waypoint("GRASP").q)
+    rise = dropped.waypoint("PLACE").T_base_tool[:3, 3] - p.waypoint("PLACE").T_base_tool[:3, 3]
+    assert np.allclose(rise, [0.0, 0.0, CFG.cubes.drop_clearance_m - CFG.cubes.place_clearance_m], atol=1e-9)
+    for w in (*p.waypoints, *dropped.waypoints):
         assert np.allclose(fk(SPEC, w.q) @ T_FLANGE_TOOL, w.T_base_tool, atol=1e-6), w.name
 
 

@@ -119,8 +119,9 @@ class FakeGrasp:
     """Plans the seed's waypoint sequence around the target (toy poses); ``failures`` maps a call
     number (0 = the first) to the error that call raises."""
 
-    def __init__(self, failures: dict[int, Exception] | None = None):
+    def __init__(self, failures: dict[int, Exception] | None = None, cube_drop: bool = False):
         self.failures = dict(failures or {})
+        self.cube_drop = cube_drop  # cubes are dropped (grasp.cubes.release: drop): no guarded touch-down
         self.calls: list[GraspCall] = []
         self.plans: list[GraspPlan] = []
 
@@ -169,7 +170,13 @@ class FakeGrasp:
             _wp("GRASP", MotionKind.LINEAR, (x, y, 0.025), gripper=GripperCommand.CLOSE),
             _wp("LIFT", MotionKind.LINEAR, (x, y, 0.15), holding=True),
             _wp("TRANSPORT", MotionKind.JOINT, (0.3, -0.45, 0.15), holding=True),
-            _wp("PLACE", MotionKind.LINEAR, (0.3, -0.45, 0.03), holding=True, **GUARD),
+            _wp(
+                "PLACE",
+                MotionKind.LINEAR,
+                (0.3, -0.45, 0.03),
+                holding=True,
+                **({} if self.cube_drop else GUARD),
+            ),
             _wp("RELEASE", MotionKind.HOLD, (0.3, -0.45, 0.03), gripper=GripperCommand.OPEN, holding=True),
             _wp("RETRACT", MotionKind.LINEAR, (0.3, -0.45, 0.15)),
         ]
@@ -258,6 +265,7 @@ class FakeRobot:
     passings: list[np.ndarray] = field(default_factory=list)  # poses a grasp check waited to pass
     passing_after: int = 0
     _moved: asyncio.Event = field(default_factory=asyncio.Event)
+    holding_reads: list[int] = field(default_factory=list)  # per object-sensor read: commands sent before it
     _holding_calls: int = 0
     _guarded_calls: int = 0
 
@@ -303,6 +311,7 @@ class FakeRobot:
     async def holding(self) -> bool | None:
         answer = self.holding_script[min(self._holding_calls, len(self.holding_script) - 1)]
         self._holding_calls += 1
+        self.holding_reads.append(len(self.commands))
         return answer
 
     async def holding_on_passing(self, q: np.ndarray) -> bool | None:

@@ -9,7 +9,7 @@ from services.common.errors import CollisionError, ContinuationLateError, StartM
 from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.task.ports import SeenCube
 from services.task.states import CycleState
-from tests.task.fakes import HELD_ROD, HOME, FakeCell, FakeGrasp, FakeVision, rod_at, seen
+from tests.task.fakes import HELD_ROD, HOME, FakeCell, FakeGrasp, FakeRobot, FakeVision, rod_at, seen
 from tests.task.fakes import joints_at as fake_joints_at
 
 CLOSE, OPEN = GripperCommand.CLOSE, GripperCommand.OPEN
@@ -136,6 +136,43 @@ async def test_a_cube_cycle_targets_the_first_cube_and_sees_the_others_as_obstac
     assert CycleState.TRANSPORT in cell.states and CycleState.REORIENT not in cell.states
     (box,) = cell.motion.requests[0].obstacles  # the blue cube, from the table up
     assert box.min[2] == 0.0 and np.allclose((box.min[:2] + box.max[:2]) / 2, [0.4, -0.1])
+
+
+async def test_a_dropped_cube_is_let_go_only_once_the_jaws_are_read_holding_it() -> None:
+    """No touch-down feels a dropped cube arrive: the object sensor is read at the rest above the zone,
+    after the way down and before the jaws let go."""
+    cubes = (SeenCube(np.array([0.5, 0.1, 0.025]), "red"),)
+    cell = FakeCell(FakeVision(seen(cubes=cubes)), grasp=FakeGrasp(cube_drop=True))
+    outcome = await cell.run(TaskKind.SORT_CUBES)
+    assert outcome.success
+    commands = cell.robot.commands
+    place = commands.index(("move", "PLACE", False))  # unguarded
+    release = commands.index(("gripper", GripperCommand.OPEN), place)
+    assert any(place < k <= release for k in cell.robot.holding_reads)
+    assert cell.robot.releases[-1]  # the open let go of the cube
+
+
+async def test_a_dropped_cube_found_gone_above_its_zone_is_not_reported_placed(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    cubes = (SeenCube(np.array([0.5, 0.1, 0.025]), "red"),)
+    robot = FakeRobot(holding_script=[True, False])  # held after the lift, gone above the zone
+    cell = FakeCell(FakeVision(seen(cubes=cubes)), grasp=FakeGrasp(cube_drop=True), robot=robot)
+    outcome = await cell.run(TaskKind.SORT_CUBES)
+    assert not outcome.success and outcome.error_code == "GraspFailureError"
+    assert "grasp verification before the release at RELEASE" in caplog.text
+    assert not any(robot.releases)  # the jaws never opened as if letting go of a placed cube
+
+
+async def test_a_guarded_touch_down_is_not_followed_by_another_read_before_the_release() -> None:
+    cubes = (SeenCube(np.array([0.5, 0.1, 0.025]), "red"),)
+    cell = FakeCell(FakeVision(seen(cubes=cubes)))  # the touch-down is guarded
+    outcome = await cell.run(TaskKind.SORT_CUBES)
+    assert outcome.success
+    commands = cell.robot.commands
+    place = commands.index(("move", "PLACE", True))
+    release = commands.index(("gripper", GripperCommand.OPEN), place)
+    assert not any(place < k <= release for k in cell.robot.holding_reads)
 
 
 async def test_a_cube_that_cannot_be_picked_now_waits_and_the_next_one_is_sorted() -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pydantic import Field, model_validator
 
+from services.common.modes import CubeRelease
 from services.common.settings.base import DEFAULT_DROP_ZONES_M, Model, Vec2, Vec6
 
 
@@ -134,8 +135,16 @@ class CubeSortSettings(Model):
     carry_clearance_m: float = Field(
         0.03, ge=0, le=0.3, description="the carried cube and the fingertips above a seen box under the way"
     )
+    # drop: the jaws open over the zone with the cube's bottom drop_clearance_m above the nominal table;
+    # touch-down: a guarded descent sets it down first (the place_approach_m / guard_* settings below)
+    release: CubeRelease = CubeRelease.DROP
+    # 12 mm: 7 mm above the highest table of the randomized worlds (+5 mm), so the arm never presses the
+    # cube into a table higher than planned; it falls 7-17 mm onto the table
+    drop_clearance_m: float = Field(
+        0.012, ge=0, le=0.1, description="cube bottom above the nominal table where a dropped cube is let go"
+    )
     place_clearance_m: float = Field(
-        0.005, ge=0, le=0.1, description="cube bottom above the table at release"
+        0.005, ge=0, le=0.1, description="cube bottom above the table at a touch-down's release"
     )
     place_approach_m: float = Field(0.05, gt=0, le=0.3)
     guard_overtravel_m: float = Field(0.005, ge=0, le=0.05)
