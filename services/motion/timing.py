@@ -44,6 +44,7 @@ _SAFETY_STEPS = (0.97, 0.9, 0.8, 0.65)
 # faster timing kept.
 STALL_INTERVAL_S = 0.25
 STALL_SHARE = 0.25
+GRID_MIN_STEP = 1e-9  # path-parameter intervals below this are merged (a knot on a grid point)
 
 
 def time_grid(duration: float, dt: float) -> Array:
@@ -160,8 +161,16 @@ def _dedupe(path: Array) -> Array:
     return path[keep]
 
 
-def _toppra_profile(geometric: object, limits: JointLimits, scale: float, n_grid: int) -> tuple[Array, Array]:
-    """TOPP-RA's maximal path velocity ṡ at grid points of s ∈ [0, 1] under velocity/acceleration limits."""
+def _toppra_profile(
+    geometric: object, limits: JointLimits, scale: float, n_grid: int, knots: Array | None = None
+) -> tuple[Array, Array]:
+    """TOPP-RA's maximal path velocity ṡ at grid points of s ∈ [0, 1] under velocity/acceleration limits.
+
+    ``knots``: the path parameters of the spline's waypoints, made grid points together with the middle
+    of each interval between them. TOPP-RA holds the limits only at its grid points, and a sharp corner
+    of the path between two of them (waypoints closer than the grid, where the path turns back) bent the
+    spline beyond any limit unseen: seen 8× the acceleration limit there (seed 1012 of the eval, the way
+    down to above the place), and the whole blended run was then slowed threefold to mend it."""
     vlim = limits.max_velocity * scale
     alim = limits.max_acceleration * scale
     constraints = [
@@ -169,6 +178,11 @@ def _toppra_profile(geometric: object, limits: JointLimits, scale: float, n_grid
         ta_constraint.JointAccelerationConstraint(np.column_stack([-alim, alim])),
     ]
     grid = np.linspace(0.0, 1.0, n_grid)
+    if knots is not None:
+        k = np.asarray(knots, dtype=float)
+        grid = np.unique(np.clip(np.concatenate([grid, k, 0.5 * (k[:-1] + k[1:])]), 0.0, 1.0))
+        grid = grid[np.concatenate([[True], np.diff(grid) > GRID_MIN_STEP])]  # no sliver intervals
+        grid[-1] = 1.0
     instance = ta_algo.TOPPRA(constraints, geometric, gridpoints=grid)
     result = instance.compute_parameterization(0.0, 0.0)
     sd = np.asarray(result[1], dtype=float)
@@ -274,9 +288,10 @@ def toppra_path(
     chord = arc_lengths(p)
     geometric = toppra.SplineInterpolator(chord / chord[-1], p, bc_type="clamped")
     n_grid = min(1000, max(100, 25 * p.shape[0]))
-    profile = _ConstAccelProfile(*_toppra_profile(geometric, limits, scale, n_grid))
+    knots = chord / chord[-1]
+    profile = _ConstAccelProfile(*_toppra_profile(geometric, limits, scale, n_grid, knots))
     if _stalls(profile):
-        denser = _ConstAccelProfile(*_toppra_profile(geometric, limits, scale, n_grid + n_grid // 2))
+        denser = _ConstAccelProfile(*_toppra_profile(geometric, limits, scale, n_grid + n_grid // 2, knots))
         log.debug(
             "TOPP-RA crept %.2f s over one grid interval: %.2f s on a denser grid",
             np.max(profile.dt),
