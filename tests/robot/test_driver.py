@@ -15,6 +15,7 @@ from services.common.errors import (
 )
 from services.kinematics.interpolation import min_jerk_keypose_trajectory, quintic_move
 from services.kinematics.trajectory import JointLimits, JointTrajectory
+from services.robot.resume import ease_in_offset
 from services.robot.service import build_driver
 from tests.conftest import HOME
 
@@ -273,11 +274,12 @@ async def test_an_estop_during_streaming_is_an_emergency_stop_error(driver):
     await driver.emergency_stop(release=True)
 
 
-def _from_rest_at_full_acceleration(spec, start: np.ndarray, period: float) -> JointTrajectory:  # type: ignore[no-untyped-def]
-    """Joint 1 from rest at 98 % of its acceleration limit, then braking to rest (a bang-bang profile,
-    as a time-optimal plan starts): within the limits judged from its own start."""
+def _from_rest_at_full_acceleration(
+    spec, start: np.ndarray, period: float, half: float = 0.2
+) -> JointTrajectory:  # type: ignore[no-untyped-def]
+    """Joint 1 from rest at 98 % of its acceleration limit for ``half`` seconds, then braking to rest (a
+    bang-bang profile, as a time-optimal plan starts): within the limits judged from its own start."""
     a = 0.98 * float(spec.max_acceleration[0])
-    half = 0.2
     ts = np.arange(0, round(2 * half / period) + 1) * period
     s = np.where(ts <= half, 0.5 * a * ts**2, a * half**2 - 0.5 * a * (2 * half - ts) ** 2)
     v = np.where(ts <= half, a * ts, a * (2 * half - ts))
@@ -300,6 +302,26 @@ async def test_a_plan_from_rest_a_hair_off_the_measured_joints_is_eased_in(drive
         driver.limits.check_accelerations(targets, period, np.vstack([q0, q0]))
     res = await driver.execute_trajectory(traj)
     assert np.allclose(res.final_q, traj.positions[-1], atol=np.deg2rad(0.05))
+
+
+async def test_a_plan_too_short_to_ease_in_goes_re_timed_from_rest(driver, sim_server):
+    # seen in eval (seed 1108, "trajectory step 1: joint 2 would accelerate at 343°/s²"): a straightening
+    # turn of the held rod, five targets long, planned from where the arm had stopped a little off where
+    # it then rested: no fade of the offset fits in so short a plan. It goes re-timed from rest.
+    period = driver.settings.robot.servo_period_s
+    q0 = driver.joint_positions()
+    start = q0 + np.deg2rad([0.3, 0, 0, 0, 0, 0])  # within the start tolerance
+    traj = _from_rest_at_full_acceleration(driver.spec, start, period, half=2 * period)
+    targets = driver._servo_targets(traj, period)
+    assert len(targets) <= 5
+    with pytest.raises(LimitViolationError):  # the plan as it is, from the arm
+        driver.limits.check_accelerations(targets, period, np.vstack([q0, q0]))
+    with pytest.raises(LimitViolationError):  # and with its offset faded out over its few targets
+        ease_in_offset(q0, start, targets, period, driver.limits)
+    before = sim_server.controller.commands_handled
+    res = await driver.execute_trajectory(traj)
+    assert np.allclose(res.final_q, traj.positions[-1], atol=np.deg2rad(0.05))
+    assert sim_server.controller.commands_handled - before > len(targets)  # more targets: slower, on its path
 
 
 async def test_a_plan_from_rest_beyond_the_limits_on_its_own_is_still_refused(driver, sim_server):
