@@ -306,9 +306,3 @@ def _assemble(
             "transport_height_m": float(P["LIFT"][2, 3]),
         },
     )
-
-
-def _lowered(T: Array, dz: float) -> Array:
-    out = T.copy()
-    out[2, 3] -= dz
-    return out

@@ -286,9 +286,9 @@ def toppra_path(
     if p.shape[0] == 2:
         return ruckig_move(p[0], p[1], limits, joint_names, dt=dt, scale=scale)
     chord = arc_lengths(p)
-    geometric = toppra.SplineInterpolator(chord / chord[-1], p, bc_type="clamped")
-    n_grid = min(1000, max(100, 25 * p.shape[0]))
     knots = chord / chord[-1]
+    geometric = toppra.SplineInterpolator(knots, p, bc_type="clamped")
+    n_grid = min(1000, max(100, 25 * p.shape[0]))
     profile = _ConstAccelProfile(*_toppra_profile(geometric, limits, scale, n_grid, knots))
     if _stalls(profile):
         denser = _ConstAccelProfile(*_toppra_profile(geometric, limits, scale, n_grid + n_grid // 2, knots))
