@@ -126,6 +126,9 @@ def joint_path(waypoints: ArrayLike, dof: int, name: str = "waypoints") -> Array
 
 
 # --- the trajectory type --------------------------------------------------------------------------
+STILL_SPEED = 1e-9  # rad/s: a joint slower than this at a trajectory's end is at rest there
+
+
 @dataclass
 class JointTrajectory:
     """Time-parameterised joint trajectory; knots at ``times`` (s, increasing, first = 0)."""
@@ -168,6 +171,16 @@ class JointTrajectory:
     @property
     def duration(self) -> float:
         return float(self.times[-1])
+
+    @property
+    def starts_in_motion(self) -> bool:
+        """It starts moving: it continues another trajectory, not a rest."""
+        return bool(np.any(np.abs(self.velocities[0]) > STILL_SPEED))
+
+    @property
+    def ends_in_motion(self) -> bool:
+        """It ends moving: another trajectory continues it."""
+        return bool(np.any(np.abs(self.velocities[-1]) > STILL_SPEED))
 
     def __len__(self) -> int:
         return int(self.times.shape[0])

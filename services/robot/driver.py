@@ -396,7 +396,7 @@ class RobotDriver(Supervision):
         self._continue_from = self._continue_tail = None
         start_err = float(np.max(np.abs(traj.positions[0] - q_now)))
         if not np.isfinite(start_err) or start_err > START_TOLERANCE_RAD:
-            if continuing and not following and np.isfinite(start_err) and _starts_moving(traj):
+            if continuing and not following and np.isfinite(start_err) and traj.starts_in_motion:
                 # the motion it continues ran out before it came (a busy machine): the arm comes to rest
                 # at that motion's end, lagging behind it as it tracks (seed 1074: 1.59° under load)
                 raise ContinuationLateError(
@@ -417,7 +417,7 @@ class RobotDriver(Supervision):
         except LimitViolationError as exc:
             if following:
                 raise
-            if _starts_moving(traj):
+            if traj.starts_in_motion:
                 raise ContinuationLateError(
                     f"{exc}: it continues a motion that has already ended (the arm is at rest); "
                     "plan it again from rest"
@@ -447,7 +447,7 @@ class RobotDriver(Supervision):
         try:
             eased = ease_in_offset(q_now, start, targets, period, self.limits)
         except LimitViolationError:
-            if _ends_moving(traj):  # what continues it expects the plan's own end
+            if traj.ends_in_motion:  # what continues it expects the plan's own end
                 raise exc from None
             try:
                 res = retime_from_rest(q_now, targets, period, self.limits)
@@ -663,13 +663,3 @@ class RobotDriver(Supervision):
         if close and release:
             raise InvalidInputError("release applies to an open of the gripper, not to a close")
         return await (self.gripper.close() if close else self.gripper.open(release))
-
-
-def _ends_moving(traj: JointTrajectory) -> bool:
-    """Whether ``traj`` ends in motion (another one continues it)."""
-    return bool(np.any(np.abs(traj.velocities[-1]) > 1e-9))
-
-
-def _starts_moving(traj: JointTrajectory) -> bool:
-    """Whether ``traj`` starts in motion (it continues another one)."""
-    return bool(np.any(np.abs(traj.velocities[0]) > 1e-9))

@@ -45,7 +45,6 @@ from services.kinematics.trajectory import JointTrajectory
 from services.task.cycle_config import CycleConfig
 from services.task.deadline import within
 from services.task.moves import (
-    ends_in_motion,
     grasp_approach,
     is_last_of,
     move_to,
@@ -54,7 +53,6 @@ from services.task.moves import (
     raised,
     run_end,
     seen_higher,
-    starts_in_motion,
 )
 from services.task.pick_planning import RESUME_TOLERANCE_RAD, PickPlanning, near
 from services.task.plan import state_for
@@ -480,15 +478,15 @@ class Orchestrator:
             if traj is not None and not self._progress.reached and not in_motion:
                 # the arm is at rest: jaws that open at a waypoint it will pass without stopping open now
                 await self._open_ahead(planned, i)
-            continues = traj is not None and ends_in_motion(traj)
+            continues = traj is not None and traj.ends_in_motion
             if traj is not None and not self._progress.reached:
                 q_now = q_known if q_known is not None else await self.robot.joints()
                 off = np.max(np.abs(traj.positions[0] - q_now)) > RESUME_TOLERANCE_RAD
-                if not in_motion and (off or starts_in_motion(traj)):
+                if not in_motion and (off or traj.starts_in_motion):
                     # the arm is not where the plan assumed (a guarded stop, an alarm), or it is at rest
                     # where the plan flows through: replan from here to the end of this blended run
                     traj = await self._replan_run(planned, i, q_now, f"replanning {w.name}")
-                    continues = traj is not None and ends_in_motion(traj)
+                    continues = traj is not None and traj.ends_in_motion
                 if traj is not None:
                     self._flowing = False  # what flowed on is continued (or stopped) by this one
                     try:
@@ -509,7 +507,7 @@ class Orchestrator:
                         traj = await self._replan_run(planned, i, q_now, f"replanning {w.name} from rest")
                         if traj is None:
                             raise
-                        continues = ends_in_motion(traj)
+                        continues = traj.ends_in_motion
                         res = await self._arm(
                             self.robot.execute(traj, w.guard_force_n, continues=continues),
                             cfg.deadlines.motion_s,
@@ -733,7 +731,7 @@ class Orchestrator:
         plan = planned.plan
         for k in range(i, len(plan.waypoints)):
             traj = planned.trajs[k]
-            if traj is None or not ends_in_motion(traj):
+            if traj is None or not traj.ends_in_motion:
                 return
             if plan.waypoints[k].gripper is GripperCommand.OPEN:
                 w = plan.waypoints[k]
@@ -822,7 +820,7 @@ class Orchestrator:
         trajs = await self._timed(self.motion.plan_moves(q, moves, obstacles), cfg.plan_s, f"planning {what}")
         for k, traj in enumerate(trajs):
             if traj is not None:
-                flows = k + 1 < len(trajs) and ends_in_motion(traj)
+                flows = k + 1 < len(trajs) and traj.ends_in_motion
                 await self._arm(self.robot.execute(traj, continues=flows), cfg.motion_s, what)
 
     async def _leave_safe(self, release: bool = False) -> None:

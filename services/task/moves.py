@@ -10,7 +10,6 @@ import numpy as np
 
 from services.common.frames import make_transform, matrix_to_quat_xyzw, tool_rotation
 from services.common.modes import GripperCommand, MotionKind, TaskKind
-from services.kinematics.trajectory import JointTrajectory
 from services.task.plan import state_for
 from services.task.planned import PlannedPick
 from services.task.ports import GraspPlan, Move, Observation, PlannedWaypoint, SeenBox, SeenRod
@@ -62,18 +61,10 @@ def rounds(plan: GraspPlan, i: int) -> bool:
     return blends(plan, i) and not after_release(i) and not after_release(i + 1)
 
 
-def ends_in_motion(traj: JointTrajectory) -> bool:
-    return bool(np.any(np.abs(traj.velocities[-1]) > 1e-9))
-
-
-def starts_in_motion(traj: JointTrajectory) -> bool:
-    return bool(np.any(np.abs(traj.velocities[0]) > 1e-9))
-
-
 def run_end(planned: PlannedPick, i: int) -> int:
     """The last waypoint of the blended run that waypoint ``i`` is in (where the arm comes to rest)."""
     end = i
-    while end + 1 < len(planned.trajs) and (t := planned.trajs[end]) is not None and ends_in_motion(t):
+    while end + 1 < len(planned.trajs) and (t := planned.trajs[end]) is not None and t.ends_in_motion:
         end += 1
     return end
 
