@@ -45,6 +45,13 @@ _SAFETY_STEPS = (0.97, 0.9, 0.8, 0.65)
 STALL_INTERVAL_S = 0.25
 STALL_SHARE = 0.25
 GRID_MIN_STEP = 1e-9  # path-parameter intervals below this are merged (a knot on a grid point)
+# When TOPP-RA finds no timing on the grid with the knots, a uniform grid point this close to a knot or
+# a knot's midpoint (a share of the uniform step) gives way to it: the sliver interval the two left
+# (1.6e-6 of the path) made TOPP-RA find no timing at all for a plain 11-point tool line, which then
+# stopped at every point (eval seed 1197 under load: 7.7 s for a 1.0 s touch-down, the rod leaning 0.01°
+# off the quiet run's lean). Only then: the grid decides where the exact acceleration peaks between
+# 10 ms samples fall, and moving it moves the uniform slowdown of whole runs (a way home 1.73 → 2.08 s).
+GRID_KNOT_CLEARANCE = 0.25
 
 
 def time_grid(duration: float, dt: float) -> Array:
@@ -170,25 +177,42 @@ def _toppra_profile(
     of each interval between them. TOPP-RA holds the limits only at its grid points, and a sharp corner
     of the path between two of them (waypoints closer than the grid, where the path turns back) bent the
     spline beyond any limit unseen: seen 8× the acceleration limit there (seed 1012 of the eval, the way
-    down to above the place), and the whole blended run was then slowed threefold to mend it."""
+    down to above the place), and the whole blended run was then slowed threefold to mend it. When
+    TOPP-RA finds no timing on that grid, it is asked again with the uniform points that lie a sliver
+    from a knot left out (``GRID_KNOT_CLEARANCE``)."""
     vlim = limits.max_velocity * scale
     alim = limits.max_acceleration * scale
     constraints = [
         ta_constraint.JointVelocityConstraint(np.column_stack([-vlim, vlim])),
         ta_constraint.JointAccelerationConstraint(np.column_stack([-alim, alim])),
     ]
-    grid = np.linspace(0.0, 1.0, n_grid)
-    if knots is not None:
-        k = np.asarray(knots, dtype=float)
-        grid = np.unique(np.clip(np.concatenate([grid, k, 0.5 * (k[:-1] + k[1:])]), 0.0, 1.0))
-        grid = grid[np.concatenate([[True], np.diff(grid) > GRID_MIN_STEP])]  # no sliver intervals
-        grid[-1] = 1.0
-    instance = ta_algo.TOPPRA(constraints, geometric, gridpoints=grid)
-    result = instance.compute_parameterization(0.0, 0.0)
-    sd = np.asarray(result[1], dtype=float)
-    if sd.shape != grid.shape or not np.all(np.isfinite(sd)):
-        raise TrajectoryLimitError("TOPP-RA found no feasible timing for the path")
-    return grid, np.maximum(sd, 0.0)
+
+    def solve(grid: Array) -> tuple[Array, Array]:
+        result = ta_algo.TOPPRA(constraints, geometric, gridpoints=grid).compute_parameterization(0.0, 0.0)
+        sd = np.asarray(result[1], dtype=float)
+        if sd.shape != grid.shape or not np.all(np.isfinite(sd)):
+            raise TrajectoryLimitError("TOPP-RA found no feasible timing for the path")
+        return grid, np.maximum(sd, 0.0)
+
+    uniform = np.linspace(0.0, 1.0, n_grid)
+    if knots is None:
+        return solve(uniform)
+    try:
+        return solve(_grid_with_knots(uniform, knots, 0.0))
+    except TrajectoryLimitError:
+        return solve(_grid_with_knots(uniform, knots, GRID_KNOT_CLEARANCE / (n_grid - 1)))
+
+
+def _grid_with_knots(uniform: Array, knots: ArrayLike, clearance: float) -> Array:
+    """The uniform grid points more than ``clearance`` from every knot and knot midpoint, and those."""
+    k = np.asarray(knots, dtype=float)
+    fixed = np.unique(np.clip(np.concatenate([[0.0, 1.0], k, 0.5 * (k[:-1] + k[1:])]), 0.0, 1.0))
+    at = np.clip(np.searchsorted(fixed, uniform), 1, fixed.size - 1)
+    gap = np.minimum(np.abs(uniform - fixed[at - 1]), np.abs(fixed[at] - uniform))
+    grid = np.unique(np.concatenate([uniform[gap > clearance], fixed]))
+    grid = grid[np.concatenate([[True], np.diff(grid) > GRID_MIN_STEP])]  # points on one another
+    grid[-1] = 1.0
+    return grid
 
 
 class _ConstAccelProfile:
