@@ -168,23 +168,36 @@ def test_acceleration_peaks_are_exact_between_knots():
     assert peaks.max() > 1.05  # the overshoot a 24-point check could miss is there
 
 
-def test_verify_trajectory_catches_a_peak_between_samples():
+def test_verify_trajectory_judges_acceleration_at_the_knots_and_as_their_stream():
     lim = JointLimits.from_spec(NOVA5, jerk=False)
     times = np.array([0.0, 0.05, 0.1])
     a = lim.max_acceleration
-    acc = np.vstack([np.zeros(6), a, -a])  # a jump within one knot interval: the quintic overshoots
+    # full acceleration, then full deceleration from the middle knot: the quintic between the knots
+    # overshoots both (a bend no streamed position shows), the stream asks for no more than the limit
+    acc = np.vstack([np.zeros(6), a, -a])
     vel = np.vstack([np.zeros(6), a * 0.025, np.zeros(6)])
     pos = HOME + np.vstack([np.zeros(6), a * 0.05**2 / 4, a * 0.05**2 / 2])
     traj = JointTrajectory(NAMES, times, pos, vel, acc)
     peaks, _ = traj.acceleration_peaks()
     assert (peaks / lim.max_acceleration).max() > 1.01
+    assert np.all(np.abs(traj.streamed_accelerations()) <= a + 1e-9)
+    report = verify_trajectory(traj, lim, samples_per_segment=4, at_rest=False)
+    assert report.acceleration_ratio <= 1.0 + 1e-9
+    # the same knots with the middle one 10 mrad further: the stream itself bends beyond the limit
+    bent = JointTrajectory(
+        NAMES, times, pos + np.vstack([np.zeros(6), np.full(6, 0.01), np.zeros(6)]), vel, acc
+    )
+    assert np.max(np.abs(bent.streamed_accelerations()) / a) > 1.1
+    with pytest.raises(TrajectoryLimitError, match=r"acceleration .* at t = 0\.0500 s"):
+        verify_trajectory(bent, lim, samples_per_segment=4, at_rest=False)
+    # so is a knot's own acceleration beyond the limit
     with pytest.raises(TrajectoryLimitError, match="acceleration"):
-        verify_trajectory(traj, lim, samples_per_segment=4, at_rest=False)
+        verify_trajectory(JointTrajectory(NAMES, times, pos, vel, acc * 1.2), lim, at_rest=False)
 
 
 def test_toppra_slows_for_the_overshoot_between_knots_instead_of_retiming():
-    # a dense, curving path (as the planner densifies one): the knot interpolation overshoots the
-    # knots' accelerations where curvature changes; one uniform slowdown takes care of it, so the
+    # a dense, curving path (as the planner densifies one): TOPP-RA holds the limits at its grid
+    # points only; one uniform slowdown takes care of what the knots' stream shows beyond them, so the
     # first safety step (97 % of the limits) already verifies, even on 96 samples per interval
     rng = np.random.default_rng(0)
     rng.uniform(-0.8, 0.8, (3, 6))  # the second path of this seed is one that used to need 90 %
