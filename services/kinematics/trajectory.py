@@ -5,9 +5,11 @@ Between knots it is the unique quintic that matches position, velocity and
 acceleration at both ends, so :meth:`JointTrajectory.sample` is C2 at any ``t``
 and a segment with zero velocity and acceleration at both ends is exactly the
 minimum-jerk (quintic smoothstep) profile ``s = 10τ³ − 15τ⁴ + 6τ⁵``.
-The knots are what a driver streams (sampled at a multiple of the knot period, or between knots a few
-ms apart), so the acceleration that counts is theirs and that of their stream; the quintic is how
-positions between them are read.
+A timed trajectory's knots (10 ms apart) are what a driver streams: sampled every 30 ms it sends
+knots, and faster it reads positions a few ms from them. So the acceleration that counts is the knots'
+and that of their stream; the quintic is how positions between them are read. A trajectory whose
+knots lie far apart (a paced touch-down: the path's points) is streamed off the quintic between them,
+and is judged by its peaks (:meth:`JointTrajectory.acceleration_peaks`) where it is made.
 :func:`verify_trajectory` checks a trajectory against :class:`JointLimits`
 independently of whatever produced it (interpolation: ``services.kinematics.interpolation``;
 time parameterisation: ``services.motion.timing``).
@@ -401,10 +403,10 @@ def verify_trajectory(
     the same interpolation the executor uses (:meth:`JointTrajectory.sample`). Acceleration: at the
     knots, and as the second differences of the knots' positions
     (:meth:`JointTrajectory.streamed_accelerations`), the acceleration a controller streamed them is
-    asked for. Velocity and acceleration may exceed their limits by the relative ``tolerance`` at most. Jerk (when the limits
-    carry it) is checked as the mean jerk over each knot interval, i.e. the change
-    of commanded acceleration between knots. Also checks that the trajectory starts
-    and ends at rest (with ``at_rest``), at ``start`` / ``goal`` when given.
+    asked for (module docstring). Velocity and acceleration may exceed their limits by the relative
+    ``tolerance`` at most. Jerk (when the limits carry it) is checked as the mean jerk over each knot
+    interval, i.e. the change of commanded acceleration between knots. Also checks that the trajectory
+    starts and ends at rest (with ``at_rest``), at ``start`` / ``goal`` when given.
     """
     if traj.dof != limits.dof:
         raise InvalidInputError(f"trajectory has {traj.dof} joints, limits have {limits.dof}")

@@ -49,8 +49,9 @@ GRID_MIN_STEP = 1e-9  # path-parameter intervals below this are merged (a knot o
 # a knot's midpoint (a share of the uniform step) gives way to it: the sliver interval the two left
 # (1.6e-6 of the path) made TOPP-RA find no timing at all for a plain 11-point tool line, which then
 # stopped at every point (eval seed 1197 under load: 7.7 s for a 1.0 s touch-down, the rod leaning 0.01°
-# off the quiet run's lean). Only then: the grid decides where the exact acceleration peaks between
-# 10 ms samples fall, and moving it moves the uniform slowdown of whole runs (a way home 1.73 → 2.08 s).
+# off the quiet run's lean). Only then: the grid decides where TOPP-RA's switches fall, and leaving
+# those points out for every path changed whole runs (a way home 1.73 → 2.08 s, slowed then for the
+# quintic's peaks).
 GRID_KNOT_CLEARANCE = 0.25
 
 
