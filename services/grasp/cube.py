@@ -119,6 +119,7 @@ def plan_pick_and_place(
     step = cfg.path_step_m
     turn0 = math.atan2(zone[1], zone[0]) - math.atan2(c[1], c[0])  # follow J1's swing
     drops = cc.release is CubeRelease.DROP
+    release_clearance = cc.drop_clearance_m if drops else cc.place_clearance_m
     options: list[_Option] = []
     for g in grasps:
         T_grasp = g.T_base_tool
@@ -133,8 +134,7 @@ def plan_pick_and_place(
         for k in range(4):
             R_place = rotation_z(turn0 + k * math.pi / 2) @ T_grasp[:3, :3]
             bottom_to_centre = np.array([0.0, 0.0, size / 2])
-            clearance = cc.drop_clearance_m if drops else cc.place_clearance_m
-            centre = np.array([zone[0], zone[1], table + clearance]) + bottom_to_centre
+            centre = np.array([zone[0], zone[1], table + release_clearance]) + bottom_to_centre
             # the carried cube keeps its pose in the tool: put its centre over the zone
             p_tool = centre - R_place @ T_tool_cube[:3, 3]
             T_place = pose(R_place, p_tool)
@@ -146,17 +146,11 @@ def plan_pick_and_place(
             T_low[2, 3] -= cc.guard_overtravel_m + cc.place_clearance_m
             T_up = T_place.copy()
             T_up[2, 3] += cc.retract_up_m
-            down = (
-                # a drop: straight down to where the jaws let go
-                [pose_path(T_transport, T_above, step)[:-1], pose_path(T_above, T_place, step)[:-1]]
-                if drops
-                # a touch-down: the guard may take it down to T_low, the release is at T_place
-                else [
-                    pose_path(T_transport, T_above, step)[:-1],
-                    pose_path(T_above, T_low, step)[:-1],
-                    pose_path(T_low, T_place, step, 1)[:-1],
-                ]
-            )
+            down = [pose_path(T_transport, T_above, step)[:-1]]
+            if drops:  # straight down to where the jaws let go
+                down.append(pose_path(T_above, T_place, step)[:-1])
+            else:  # the guard may take it down to T_low; the release is at T_place
+                down += [pose_path(T_above, T_low, step)[:-1], pose_path(T_low, T_place, step, 1)[:-1]]
             i_place = sum(len(p) for p in down)
             place = np.vstack([*down, pose_path(T_place, T_up, step)])
             poses = {

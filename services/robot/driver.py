@@ -436,8 +436,9 @@ class RobotDriver(Supervision):
         out over its first targets (:func:`ease_in_offset`, every target checked again); a plan beyond
         the limits from its own start is refused as it is (``exc``). A plan to rest too short to fade the
         offset out within the limits (seed 1108 of the eval: a 0.13 s straightening turn of the held rod,
-        five targets, a little off where the arm rested) goes through the same targets re-timed from rest where the arm is
-        (:func:`retime_from_rest`, the ramp of a resumed stream), slower but on its path."""
+        five targets, a little off where the arm rested) goes through the same targets re-timed from
+        rest where the arm is (:func:`retime_from_rest`, the ramp of a resumed stream), slower but on
+        its path."""
         start = np.asarray(traj.positions[0], dtype=float)
         off_deg = float(np.rad2deg(np.max(np.abs(q_now - start))))
         try:
