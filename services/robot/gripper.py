@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol
 
 from services.common.errors import GripperError, RobotCommunicationError
@@ -14,6 +14,7 @@ from services.robot.link import ControllerLink
 class GripperState:
     closed: bool
     object_detected: bool | None  # None when no DI is mapped
+    unchanged: bool = False  # the jaws were already as asked: nothing sent (an open of open jaws)
 
 
 class Gripper(Protocol):
@@ -64,7 +65,7 @@ class DigitalOutputGripper:
         if not close and self._known_open:
             self.opens_skipped += 1
             await self._stroke_done()
-            return self.state()
+            return replace(self.state(), unchanged=True)
         self._known_open = False
         self._opening_since_ms = None
         try:

@@ -178,7 +178,8 @@ class RobotControllerServicer(robot_pb2_grpc.RobotControllerServicer):
             success=True,
             closed=st.closed,
             object_detected=bool(st.object_detected),
-            message="closed" if st.closed else "open",
+            message=("already " if st.unchanged else "") + ("closed" if st.closed else "open"),
+            unchanged=st.unchanged,
         )
 
     async def ExecuteGrasp(

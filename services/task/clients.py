@@ -337,7 +337,9 @@ class GrpcRobot:
             r = await self._stub.SetGripper(
                 robot_pb2.SetGripperRequest(close=close, release=release), timeout=self._timeout
             )
-        return GripOutcome(r.closed, r.object_detected if self._object_di is not None else None)
+        return GripOutcome(
+            r.closed, r.object_detected if self._object_di is not None else None, unchanged=r.unchanged
+        )
 
     async def holding(self) -> bool | None:
         if self._object_di is None:

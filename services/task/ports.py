@@ -60,6 +60,7 @@ class MoveOutcome:
 class GripOutcome:
     closed: bool
     object_detected: bool | None
+    unchanged: bool = False  # the jaws were already as asked: no actuation (an open of open jaws)
 
 
 @dataclass

@@ -13,7 +13,7 @@ from services.task.states import PickOutcome
 class RecordingRobot:
     """The robot port, recording on the outcome what the cycle executed: the joint waypoints the arm
     went through (each motion's start and its end, or where a guarded one stopped), whether it rested
-    at each, and the gripper actions."""
+    at each, and the gripper actions that moved the jaws."""
 
     def __init__(self, robot: RobotPort, out: PickOutcome):
         self._robot, self._out = robot, out
@@ -38,6 +38,8 @@ class RecordingRobot:
         return res
 
     async def gripper(self, close: bool, release: bool = False) -> GripOutcome:
-        self._out.gripper_actions += 1
-        self._out.gripper_releases += release
-        return await self._robot.gripper(close, release)
+        g = await self._robot.gripper(close, release)
+        if not g.unchanged:  # an open of jaws already open moved nothing and took no actuation time
+            self._out.gripper_actions += 1
+            self._out.gripper_releases += release
+        return g

@@ -114,9 +114,9 @@ async def test_an_open_gripper_is_not_opened_again():
         await gripper.open()
         handled = sim.controller.commands_handled
         state = await gripper.open()
-        assert not state.closed
+        assert not state.closed and state.unchanged
         assert sim.controller.commands_handled == handled and gripper.opens_skipped == 1
-        await gripper.close()
+        assert not (await gripper.close()).unchanged
         assert sim.controller.commands_handled > handled  # a close is always sent
         await gripper.open()
         assert gripper.opens_skipped == 1  # after a close, an open is sent again

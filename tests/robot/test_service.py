@@ -88,7 +88,10 @@ async def test_control_rpcs(stub, service):
         await stub.SetGripper(robot_pb2.SetGripperRequest(close=True, release=True))
     assert service.driver.gripper.state().closed  # refused before anything was sent
     g = await stub.SetGripper(robot_pb2.SetGripperRequest(close=False, release=True))
-    assert not g.closed and not service.driver.gripper.state().closed
+    assert not g.closed and not g.unchanged and not service.driver.gripper.state().closed
+    # open jaws opened again: nothing sent, and the answer says so (the eval charges it no time)
+    g = await stub.SetGripper(robot_pb2.SetGripperRequest(close=False))
+    assert not g.closed and g.unchanged and g.message == "already open"
 
 
 async def test_errors_cross_grpc_with_their_type(stub):

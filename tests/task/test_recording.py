@@ -16,12 +16,15 @@ class _Arm:
 
     def __init__(self, *outcomes: MoveOutcome):
         self.outcomes = list(outcomes)
+        self.open = False
 
     async def execute(self, traj, force_guard_n: float = 0.0, continues: bool = False) -> MoveOutcome:  # type: ignore[no-untyped-def]
         return self.outcomes.pop(0)
 
     async def gripper(self, close: bool, release: bool = False) -> GripOutcome:
-        return GripOutcome(closed=close, object_detected=None)
+        unchanged = not close and self.open  # as the driver's gripper: open jaws are not opened again
+        self.open = not close
+        return GripOutcome(closed=close, object_detected=None, unchanged=unchanged)
 
 
 def _q(*v: float) -> np.ndarray:
@@ -52,3 +55,8 @@ async def test_flowing_moves_record_their_planned_ends_and_a_guarded_stop_where_
     assert out.gripper_actions == 1 and out.gripper_releases == 0
     await robot.gripper(False, release=True)
     assert out.gripper_actions == 2 and out.gripper_releases == 1
+    # the next cycle's open ahead of the grasp finds the jaws open: no action, no actuation time
+    g = await robot.gripper(False)
+    assert g.unchanged and out.gripper_actions == 2 and out.gripper_releases == 1
+    await robot.gripper(True)
+    assert out.gripper_actions == 3

@@ -112,16 +112,18 @@ class SetGripperRequest(_message.Message):
     def __init__(self, close: _Optional[bool] = ..., release: _Optional[bool] = ...) -> None: ...
 
 class GripperResponse(_message.Message):
-    __slots__ = ("success", "closed", "object_detected", "message")
+    __slots__ = ("success", "closed", "object_detected", "message", "unchanged")
     SUCCESS_FIELD_NUMBER: _ClassVar[int]
     CLOSED_FIELD_NUMBER: _ClassVar[int]
     OBJECT_DETECTED_FIELD_NUMBER: _ClassVar[int]
     MESSAGE_FIELD_NUMBER: _ClassVar[int]
+    UNCHANGED_FIELD_NUMBER: _ClassVar[int]
     success: bool
     closed: bool
     object_detected: bool
     message: str
-    def __init__(self, success: _Optional[bool] = ..., closed: _Optional[bool] = ..., object_detected: _Optional[bool] = ..., message: _Optional[str] = ...) -> None: ...
+    unchanged: bool
+    def __init__(self, success: _Optional[bool] = ..., closed: _Optional[bool] = ..., object_detected: _Optional[bool] = ..., message: _Optional[str] = ..., unchanged: _Optional[bool] = ...) -> None: ...
 
 class StopRequest(_message.Message):
     __slots__ = ()
