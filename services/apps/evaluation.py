@@ -252,7 +252,8 @@ def execution_bound(
 ) -> ExecutionBound:
     """The executed joint waypoints timed time-optimally and jerk-limited (ruckig) at ``limits``, at rest
     where ``rests`` says the arm rested (:func:`services.motion.bound.stop_to_stop_s`; every waypoint
-    when it says nothing), plus ``actuation_s`` per gripper action, of which ``releases`` (opens that
+    when it says nothing), plus ``actuation_s`` per gripper action that moved the jaws (as recorded:
+    :class:`services.task.recording.RecordingRobot`), of which ``releases`` (opens that
     let go of a held object) take ``release_s``."""
     from services.motion.bound import stop_to_stop_s
     from services.motion.timing import rest_to_rest

@@ -51,6 +51,11 @@ async def test_eval_two_trials_reports_ground_truth_on_the_controller_clock(tmp_
         assert len(r.executed_rests) == len(r.executed_waypoints) and not all(r.executed_rests)
         assert r.bound_motion_s is not None and r.bound_rest_to_rest_motion_s is not None
         assert r.bound_motion_s < r.bound_rest_to_rest_motion_s
+    # the first trial's release left the jaws open: the second's open ahead of its grasp sends nothing
+    # and the bound charges it nothing (a close and a release only)
+    second, g = report.results[1], s.gripper
+    if second.attempts == 1:
+        assert second.bound_gripper_s == pytest.approx(g.actuation_time_s + g.release_wait_s)
     summary = report.summary()
     assert summary["success_rate"] == report.successes / 2 and summary["harness_errors"] == 0
     share, own = summary["compute_share_of_cycle"], summary["cell_compute_share_of_cycle"]
