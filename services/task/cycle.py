@@ -47,12 +47,14 @@ from services.task.deadline import within
 from services.task.moves import (
     grasp_approach,
     is_last_of,
+    joined,
     move_to,
     placed_box,
     raise_waypoint,
     raised,
     run_end,
     seen_higher,
+    sent_along,
 )
 from services.task.pick_planning import RESUME_TOLERANCE_RAD, PickPlanning, near
 from services.task.plan import state_for
@@ -455,10 +457,13 @@ class Orchestrator:
         plan = planned.plan
         q_known: np.ndarray | None = None  # where the last move ended (no round trip for the joints)
         in_motion = False  # the last trajectory ends in motion: this one continues it
+        along: int | None = None  # the waypoint whose motion went out with the one before it
         for i in range(resume.index, len(plan.waypoints)):
             if i >= planned.rest_from and move_to(plan, i) is not None:
                 await planned.settle(cfg.deadlines.plan_s)
             w, traj = plan.waypoints[i], planned.trajs[i]
+            if i == along:
+                traj = None  # on its way already
             self._progress = Progress(i, reached=i == resume.index and resume.reached)
             state = state_for(w.name)
             if state is not self.state:
@@ -487,13 +492,22 @@ class Orchestrator:
                     # where the plan flows through: replan from here to the end of this blended run
                     traj = await self._replan_run(planned, i, q_now, f"replanning {w.name}")
                     continues = traj is not None and traj.ends_in_motion
+                if traj is not None and not in_motion and sent_along(planned, i):
+                    # a short move from rest into the next: one call, so the stream never holds less
+                    # than the driver keeps ahead of a call that flows on (states and progress: the next's)
+                    along, nxt = i + 1, plan.waypoints[i + 1]
+                    traj = joined(traj, cast(JointTrajectory, planned.trajs[along]))
+                    continues = traj.ends_in_motion
+                    if (state_along := state_for(nxt.name)) is not self.state:
+                        self._enter(state_along, nxt.name)
+                    self._progress = Progress(along)
                 if traj is not None:
                     self._flowing = False  # what flowed on is continued (or stopped) by this one
                     try:
                         res = await self._arm(
                             self._checked(self.robot.execute(traj, w.guard_force_n, continues=continues)),
                             cfg.deadlines.motion_s,
-                            f"motion to {w.name}",
+                            f"motion to {plan.waypoints[along].name if along == i + 1 else w.name}",
                         )
                     except (ContinuationLateError, StartMismatchError) as exc:
                         # the motion this one flows from ended before it came (a busy planner, a slow
@@ -503,6 +517,7 @@ class Orchestrator:
                         if in_motion and isinstance(exc, StartMismatchError):
                             raise  # off the queued motion still under way: not mended from here
                         log.info("%s: %s", w.name, exc)
+                        along, self._progress = None, Progress(i)  # the run goes again move by move
                         q_now = await self.robot.joints()
                         traj = await self._replan_run(planned, i, q_now, f"replanning {w.name} from rest")
                         if traj is None:
@@ -517,7 +532,7 @@ class Orchestrator:
                     self._flowing = continues
                     log.debug(
                         "%s: planned %.2f s, executed %.2f s%s",
-                        w.name,
+                        w.name + (f" + {plan.waypoints[i + 1].name}" if along == i + 1 else ""),
                         traj.duration,
                         res.duration_s,
                         " (stopped on touch-down)" if res.stopped_early else "",
@@ -540,7 +555,9 @@ class Orchestrator:
                             ),
                         )
             self._progress = Progress(i, reached=True)
-            if w.gripper is not None and not (in_motion and w.gripper is GripperCommand.OPEN):
+            # an open at a waypoint passed without stopping was done before setting off
+            passed = in_motion or along == i + 1
+            if w.gripper is not None and not (passed and w.gripper is GripperCommand.OPEN):
                 close = w.gripper is GripperCommand.CLOSE
                 # letting go of what it set down, the arm may move away once the jaws are clear of it
                 release = not close and w.holding

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from services.kinematics.trajectory import JointTrajectory
+from services.task.moves import joined_at
 from services.task.pick_planning import near
 from services.task.ports import GripOutcome, MoveOutcome, RobotPort
 from services.task.states import PickOutcome
@@ -30,6 +31,9 @@ class RecordingRobot:
         if not wps or not near(np.asarray(wps[-1]), start):  # within the tracking error: the same point
             wps.append([float(v) for v in start])
             rests.append(True)  # it set off from elsewhere than the last move's end: from rest
+        for q in joined_at(traj):  # moves sent in one call: the arm flowed through where they meet
+            wps.append([float(v) for v in q])
+            rests.append(False)
         # a move that ran to its end went through its planned end (one that flows on returns while the arm
         # is still on its way, anywhere on it); one cut short ended where it stopped
         end = res.final_q if res.stopped_early else traj.positions[-1]

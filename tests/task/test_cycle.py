@@ -9,7 +9,17 @@ from services.common.errors import CollisionError, ContinuationLateError, StartM
 from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.task.ports import SeenCube
 from services.task.states import CycleState
-from tests.task.fakes import HELD_ROD, HOME, FakeCell, FakeGrasp, FakeRobot, FakeVision, rod_at, seen
+from tests.task.fakes import (
+    HELD_ROD,
+    HOME,
+    FakeCell,
+    FakeGrasp,
+    FakeMotion,
+    FakeRobot,
+    FakeVision,
+    rod_at,
+    seen,
+)
 from tests.task.fakes import joints_at as fake_joints_at
 
 CLOSE, OPEN = GripperCommand.CLOSE, GripperCommand.OPEN
@@ -115,6 +125,38 @@ async def test_the_arm_stops_only_where_physics_asks() -> None:
     assert cell.robot.commands.count(("gripper", OPEN)) == 2  # and the release
     # only the open that lets go of the set-down rod answers once the jaws are clear of it
     assert cell.robot.releases == [False, False, True]
+
+
+class _ShortPreGrasp(FakeMotion):
+    """The toy arm's motions, the pre-grasp timed 0.2 s: a short move from rest into the grasp line."""
+
+    async def plan_moves(self, start, moves, obstacles):  # type: ignore[no-untyped-def]
+        out = await super().plan_moves(start, moves, obstacles)
+        return [
+            t.scaled(0.2 / t.duration) if t is not None and t.meta["label"] == "PRE_GRASP" else t for t in out
+        ]
+
+
+async def test_a_short_move_from_rest_goes_out_in_one_call_with_the_move_it_flows_into() -> None:
+    """Sent on its own, the 0.2 s pre-grasp would leave the driver less in hand than it keeps ahead of a
+    call that flows on by the time the grasp line came (the twin's stream then fell behind and resumed
+    from rest). One call takes both; the open was done before setting off and is not asked again on the
+    way, the state is GRASP from the call on, and the record keeps the pre-grasp as a point flowed through."""
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))), motion=_ShortPreGrasp(blending=True))
+    outcome = await cell.run()
+    assert outcome.success
+    assert cell.robot.commands[:4] == [
+        ("recover",),
+        ("gripper", OPEN),  # before setting off
+        ("move", "PRE_GRASP", False),  # and GRASP with it
+        ("gripper", CLOSE),
+    ]
+    assert cell.robot.continued[0] == "LIFT"  # the joined call ends at rest, at the grasp
+    (pre_grasp,) = [m for m in cell.motion.requests[0].moves if m.label == "PRE_GRASP"]
+    assert outcome.executed_rests[:3] == [True, False, True]
+    assert np.allclose(outcome.executed_waypoints[1], pre_grasp.target)  # a joint move
+    assert np.allclose(outcome.executed_waypoints[2], cell.robot.reached["PRE_GRASP"])  # the grasp
+    assert cell.states[cell.states.index(CycleState.APPROACH) + 1] is CycleState.GRASP
 
 
 async def test_a_guarded_approach_is_paced_at_the_touch_down_speed() -> None:
