@@ -492,10 +492,12 @@ class Orchestrator:
                     # where the plan flows through: replan from here to the end of this blended run
                     traj = await self._replan_run(planned, i, q_now, f"replanning {w.name}")
                     continues = traj is not None and traj.ends_in_motion
+                moving_to = w.name
                 if traj is not None and not in_motion and sent_along(planned, i):
                     # a short move from rest into the next: one call, so the stream never holds less
                     # than the driver keeps ahead of a call that flows on (states and progress: the next's)
                     along, nxt = i + 1, plan.waypoints[i + 1]
+                    moving_to = f"{w.name} + {nxt.name}"
                     traj = joined(traj, cast(JointTrajectory, planned.trajs[along]))
                     continues = traj.ends_in_motion
                     if (state_along := state_for(nxt.name)) is not self.state:
@@ -507,7 +509,7 @@ class Orchestrator:
                         res = await self._arm(
                             self._checked(self.robot.execute(traj, w.guard_force_n, continues=continues)),
                             cfg.deadlines.motion_s,
-                            f"motion to {plan.waypoints[along].name if along == i + 1 else w.name}",
+                            f"motion to {moving_to}",
                         )
                     except (ContinuationLateError, StartMismatchError) as exc:
                         # the motion this one flows from ended before it came (a busy planner, a slow
@@ -517,7 +519,8 @@ class Orchestrator:
                         if in_motion and isinstance(exc, StartMismatchError):
                             raise  # off the queued motion still under way: not mended from here
                         log.info("%s: %s", w.name, exc)
-                        along, self._progress = None, Progress(i)  # the run goes again move by move
+                        # the run goes again move by move
+                        along, moving_to, self._progress = None, w.name, Progress(i)
                         q_now = await self.robot.joints()
                         traj = await self._replan_run(planned, i, q_now, f"replanning {w.name} from rest")
                         if traj is None:
@@ -532,7 +535,7 @@ class Orchestrator:
                     self._flowing = continues
                     log.debug(
                         "%s: planned %.2f s, executed %.2f s%s",
-                        w.name + (f" + {plan.waypoints[i + 1].name}" if along == i + 1 else ""),
+                        moving_to,
                         traj.duration,
                         res.duration_s,
                         " (stopped on touch-down)" if res.stopped_early else "",
