@@ -493,12 +493,12 @@ class Orchestrator:
                     traj = await self._replan_run(planned, i, q_now, f"replanning {w.name}")
                     continues = traj is not None and traj.ends_in_motion
                 moving_to = w.name
-                if traj is not None and not in_motion and sent_along(planned, i):
+                if traj is not None and not in_motion and (then := sent_along(planned, i)) is not None:
                     # a short move from rest into the next: one call, so the stream never holds less
                     # than the driver keeps ahead of a call that flows on (states and progress: the next's)
                     along, nxt = i + 1, plan.waypoints[i + 1]
                     moving_to = f"{w.name} + {nxt.name}"
-                    traj = joined(traj, cast(JointTrajectory, planned.trajs[along]))
+                    traj = joined(traj, then)
                     continues = traj.ends_in_motion
                     if (state_along := state_for(nxt.name)) is not self.state:
                         self._enter(state_along, nxt.name)

@@ -70,21 +70,21 @@ SHORT_FROM_REST_S = 0.36
 JOINED_AT = "joined_at"  # a joined trajectory's meta: the joint positions where its parts meet
 
 
-def sent_along(planned: PlannedPick, i: int) -> bool:
-    """Whether waypoint ``i + 1``'s motion goes out in one call with waypoint ``i``'s: that one starts at
-    rest, flows into it and is short (``SHORT_FROM_REST_S``), nothing is done at ``i`` between them (no
-    gripper action but an open done before setting off, nothing held, no guard), and ``i + 1``'s motion is
-    planned (not still planning in the background) and unguarded."""
+def sent_along(planned: PlannedPick, i: int) -> JointTrajectory | None:
+    """Waypoint ``i + 1``'s motion when it goes out in one call with waypoint ``i``'s, else None: that one
+    starts at rest, flows into it and is short (``SHORT_FROM_REST_S``), nothing is done at ``i`` between
+    them (no gripper action but an open done before setting off, nothing held, no guard), and ``i + 1``'s
+    motion is planned (not still planning in the background) and unguarded."""
     trajs = planned.trajs
     if i + 1 >= min(len(trajs), planned.rest_from):
-        return False
+        return None
     a, b = trajs[i], trajs[i + 1]
     if a is None or b is None or a.starts_in_motion or not a.ends_in_motion:
-        return False
+        return None
     w, nxt = planned.plan.waypoints[i], planned.plan.waypoints[i + 1]
     if a.duration >= SHORT_FROM_REST_S or w.holding or w.guard_force_n > 0 or nxt.guard_force_n > 0:
-        return False
-    return w.gripper is None or w.gripper is GripperCommand.OPEN
+        return None
+    return b if w.gripper is None or w.gripper is GripperCommand.OPEN else None
 
 
 def joined(a: JointTrajectory, b: JointTrajectory) -> JointTrajectory:
