@@ -164,6 +164,7 @@ class RecordService(ServiceShell):
         # converter-thread state
         self._last_mode: int | None = None
         self._last_tf_ns = 0
+        self._last_q: np.ndarray | None = None  # the last joint state's angles (a TF out of turn)
         self._last_recorded_frame_ns: int | None = None
         self._calibration: bytes | None = None
 
@@ -396,6 +397,7 @@ class RecordService(ServiceShell):
         self._emit(Topic.JOINT_STATES, payload, t)
         js = common_pb2.JointState.FromString(payload)
         self.last_joint_seq = js.header.seq
+        self._last_q = np.asarray(js.position, dtype=float)
         rate = self.settings.record.foxglove.tf_rate_hz
         at = js.source_stamp_ns or t  # decimated on the controller's clock: the same states however loaded
         if (rate <= 0 or abs(at - self._last_tf_ns) >= 1e9 / rate) and self._wanted(Topic.TF):
@@ -413,13 +415,22 @@ class RecordService(ServiceShell):
                     self._loop.call_soon_threadsafe(self._status_wanted.set)
 
     def _frame(self, frame: RGBDFrame, T_base_camera: np.ndarray | None, t: int) -> None:
-        if T_base_camera is not None and (
-            self.transforms.T_base_camera is None
-            or not np.array_equal(self.transforms.T_base_camera, T_base_camera)
-        ):
-            self.transforms.T_base_camera = np.asarray(T_base_camera, dtype=float)
         rs = self.settings.record
         stamp = frame.stamp_ns or t
+        moved = T_base_camera is not None and (
+            self.transforms.T_base_camera is None
+            or not np.array_equal(self.transforms.T_base_camera, T_base_camera)
+        )
+        if moved:
+            self.transforms.T_base_camera = np.asarray(T_base_camera, dtype=float)
+        # the camera's TF names the frame its images name: a replay pairs the two by that name (as "camera"
+        # beside "camera_color_optical_frame" images it found no pose and detected without one)
+        renamed = bool(frame.frame_id) and frame.frame_id != self.transforms.camera_frame
+        if renamed:
+            self.transforms.camera_frame = frame.frame_id
+        if (moved or renamed) and self._last_q is not None and self._wanted(Topic.TF):
+            # the camera's pose before its first image, not at the next joint state after it
+            self._emit(Topic.TF, self.transforms.message(self._last_q, stamp), t)
         live = self._wanted(Topic.CAMERA_COLOR, Topic.CAMERA_DEPTH, Topic.CAMERA_CALIBRATION, record=False)
         record = (
             self.recorder is not None

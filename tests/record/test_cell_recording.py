@@ -21,10 +21,11 @@ from pickplace.v1 import common_pb2, task_pb2
 from rich.console import Console
 
 from services.apps.cell import Cell
-from services.apps.record_cli import cell_live_view, run_replay
+from services.apps.record_cli import FRAME_TOPICS, cell_live_view, run_replay
 from services.common.keys import CellKeys
 from services.common.modes import TaskKind
 from services.record.channels import Topic
+from services.record.replay import Decoder, FrameAssembler, iter_messages
 from services.record.service import RecordService
 from services.record.writer import RecordingStopped
 from tests.apps.conftest import cell_settings
@@ -229,3 +230,22 @@ async def test_a_twin_cycle_is_live_in_foxglove_and_recorded_and_replays(
     assert report.messages == summary.statistics.message_count
     assert report.comparisons, "recorded frames with their recorded detections"
     assert report.ok, [c.describe() for c in report.comparisons]
+    # /tf names the camera as its images do (it named it "camera": a replay pairs them by that name and
+    # found the camera's pose only when such a /tf came before the first image by chance, otherwise it
+    # detected without it and found one obstacle more than the cell)
+    with files[0].open("rb") as f:
+        decoded = [
+            (c.topic, m)
+            for _s, c, _m, m in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages(
+                topics=[Topic.TF, Topic.CAMERA_COLOR]
+            )
+        ]
+    image_frames = {m.frame_id for topic, m in decoded if topic == Topic.CAMERA_COLOR}
+    tf_children = {tf.child_frame_id for topic, m in decoded if topic == Topic.TF for tf in m.transforms}
+    assert image_frames and image_frames <= tf_children, (image_frames, sorted(tf_children))
+    # and every frame the replay assembled had the camera's pose
+    assembler, frame_decoder, posed = FrameAssembler(), Decoder(), []
+    for m in iter_messages(files[0]):
+        if m.topic in FRAME_TOPICS and assembler.add(m.topic, frame_decoder.decode(m)) is not None:
+            posed.append(assembler.T_base_camera is not None)
+    assert posed and all(posed), posed
