@@ -12,9 +12,11 @@ which the simulator keeps in sim time whatever the machine's load), the compute 
 the critical path (DETECT + PLAN) in wall time beside it, and the bound: the
 time-optimal jerk-limited (ruckig) duration of the executed joint waypoints at the
 robot's limits, resting where the arm rested and flowing through the rest (each joint on its own,
-stopping only where it turns back: ``services.motion.bound``), plus the gripper's actuation time per
-action (its release time for an open that lets go of the placed object). Beside it, the same waypoints
-at rest at each (``bound_rest_to_rest_motion_s``). Of the compute, the twin camera rendering the
+stopping only where it turns back: ``services.motion.bound``), a guarded touch-down no faster than its
+tool pace allows (``services.task.pacing.LinePace``: the approach speed above its slow band, the touch
+speed through it, the tool's speed changes between; ``bound_pace_s`` is what that adds), plus the
+gripper's actuation time per action (its release time for an open that lets go of the placed
+object). Beside it, the same waypoints at rest at each (``bound_rest_to_rest_motion_s``). Of the compute, the twin camera rendering the
 frames the cycle waited for is told apart (``camera_wall_s``): on this machine's CPU it is most of
 DETECT, where a real camera streams its frames.
 ``load`` runs that many busy processes beside the cell (always ended with the run).
@@ -41,10 +43,11 @@ import sys
 import tempfile
 import time
 from collections import Counter
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import asdict, dataclass, field
 from typing import TypedDict
 
+import numpy as np
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
@@ -56,8 +59,10 @@ from services.apps.eval_report import write_report as write_report
 from services.common.modes import TaskKind
 from services.common.priority import process_nice
 from services.common.settings import Settings
-from services.kinematics.robot_models import get_robot
+from services.kinematics import analytic
+from services.kinematics.robot_models import RobotSpec, get_robot
 from services.kinematics.trajectory import JointLimits
+from services.task.pacing import LinePace
 from services.task.states import CycleState, PickOutcome
 
 log = logging.getLogger("pickplace.eval")
@@ -104,6 +109,7 @@ class TrialResult:
     bound_s: float | None = None  # time-optimal duration of what was executed (module docstring)
     bound_motion_s: float | None = None
     bound_gripper_s: float | None = None
+    bound_pace_s: float | None = None  # guarded lines' tool pace beyond the joints' time (touch-downs)
     bound_rest_to_rest_motion_s: float | None = None  # the motion resting at every waypoint
     executed_waypoints: list[list[float]] = field(default_factory=list)  # rad
     executed_rests: list[bool] = field(default_factory=list)  # per waypoint: the arm rested there
@@ -135,6 +141,7 @@ class EvalSummary(TypedDict):
     camera_wall_median_s: float | None  # of the compute: the twin camera's frames (TrialResult)
     cell_compute_share_of_cycle: float | None  # the compute without them
     bound_median_s: float | None
+    bound_pace_median_s: float | None  # of the bound: touch-downs' pace beyond the joints' time
     bound_ratio_median: float | None
     bound_ratio_p95: float | None
     stage_median_s: dict[str, float]
@@ -175,6 +182,7 @@ class EvalReport:
         cycle_1x = [r.cycle_time_1x_s for r in ran]
         ratios = [x for r in ok if (x := r.bound_ratio) is not None]
         bounds = [r.bound_s for r in ok if r.bound_s is not None]
+        paces = [r.bound_pace_s for r in ok if r.bound_pace_s is not None]
         fails = Counter(
             f"{r.stage_reached}: {r.error_code or 'ground truth'}" for r in self.results if not r.success
         )
@@ -200,6 +208,7 @@ class EvalReport:
                 (sum(compute) - sum(camera)) / sum(cycle_1x) if sum(cycle_1x) > 0 else None
             ),
             "bound_median_s": statistics.median(bounds) if bounds else None,
+            "bound_pace_median_s": statistics.median(paces) if paces else None,
             "bound_ratio_median": statistics.median(ratios) if ratios else None,
             "bound_ratio_p95": _p95(ratios),
             "stage_median_s": self.stage_medians(),
@@ -234,10 +243,11 @@ class ExecutionBound:
     motion_s: float  # resting where the arm rested, flowing through the rest
     gripper_s: float
     rest_to_rest_motion_s: float  # resting at every waypoint (ruckig, all joints in step)
+    pace_s: float = 0.0  # what guarded lines need beyond motion_s at their tool pace (touch-downs)
 
     @property
     def total_s(self) -> float:
-        return self.motion_s + self.gripper_s
+        return self.motion_s + self.pace_s + self.gripper_s
 
 
 def execution_bound(
@@ -249,23 +259,41 @@ def execution_bound(
     actuation_s: float,
     releases: int = 0,
     release_s: float = 0.0,
+    line_floors: Mapping[int, float] | None = None,
 ) -> ExecutionBound:
     """The executed joint waypoints timed time-optimally and jerk-limited (ruckig) at ``limits``, at rest
     where ``rests`` says the arm rested (:func:`services.motion.bound.stop_to_stop_s`; every waypoint
     when it says nothing), plus ``actuation_s`` per gripper action that moved the jaws (as recorded:
     :class:`services.task.recording.RecordingRobot`), of which ``releases`` (opens that
-    let go of a held object) take ``release_s``."""
+    let go of a held object) take ``release_s``. ``line_floors``: what each guarded line (a touch-down,
+    by the index of the waypoint it ended at) needs at least at its tool pace (:func:`line_floors`); the
+    excess over the joints' time is ``pace_s``."""
     from services.motion.bound import stop_to_stop_s
     from services.motion.timing import rest_to_rest
 
     if len(waypoints) < 2:
-        motion = each = 0.0
+        motion = each = paced = 0.0
     else:
         each = rest_to_rest(waypoints, limits, joint_names).duration
         flags = rests if len(rests) == len(waypoints) else [True] * len(waypoints)
         motion = stop_to_stop_s(waypoints, flags, limits)
+        paced = stop_to_stop_s(waypoints, flags, limits, floors=line_floors) if line_floors else motion
     gripper = (gripper_actions - releases) * actuation_s + releases * release_s
-    return ExecutionBound(motion, gripper, each)
+    return ExecutionBound(motion, gripper, each, paced - motion)
+
+
+def line_floors(
+    waypoints: list[list[float]], paces: Mapping[int, LinePace], spec: RobotSpec
+) -> dict[int, float]:
+    """For each guarded line that ended at waypoint ``i`` (``paces``), the least time its tool pace
+    allows from the waypoint before to there (:meth:`services.task.pacing.LinePace.least_s`). The line
+    keeps the tool's orientation, so the flange goes as far as the tool."""
+    floors: dict[int, float] = {}
+    for i, pace in paces.items():
+        if 0 < i < len(waypoints):
+            ends = analytic.fk(spec, np.asarray([waypoints[i - 1], waypoints[i]], dtype=float))[:, :3, 3]
+            floors[i] = pace.least_s(float(np.linalg.norm(ends[1] - ends[0])))
+    return floors
 
 
 @contextlib.contextmanager
@@ -322,7 +350,7 @@ async def run_eval(
         ranges=record_ranges(s.sim.twin) if randomize else {},
     )
     spec = get_robot(s.robot.model)
-    trial = _TrialRunner(s, task, JointLimits.from_spec(spec), list(spec.joint_names))
+    trial = _TrialRunner(s, task, spec)
     t_start = time.perf_counter()
     calibrated = calibration_error is not None
     # its own state directory (the task's cycle journal): never the cell's, nor another eval's beside it
@@ -357,9 +385,12 @@ async def run_eval(
 class _TrialRunner:
     settings: Settings
     task: str
-    limits: JointLimits
-    joint_names: list[str]
+    spec: RobotSpec
     tilt_at_release: list[float] = field(default_factory=list)
+
+    @property
+    def limits(self) -> JointLimits:
+        return JointLimits.from_spec(self.spec)
 
     async def run_all(
         self,
@@ -436,11 +467,12 @@ class _TrialRunner:
             outcome.executed_waypoints,
             outcome.executed_rests,
             self.limits,
-            self.joint_names,
+            list(self.spec.joint_names),
             outcome.gripper_actions,
             self.settings.gripper.actuation_time_s,
             outcome.gripper_releases,
             self.settings.gripper.release_wait_s,
+            line_floors(outcome.executed_waypoints, outcome.executed_paces, self.spec),
         )
         return TrialResult(
             seed=seed,
@@ -463,6 +495,7 @@ class _TrialRunner:
             bound_s=bound.total_s,
             bound_motion_s=bound.motion_s,
             bound_gripper_s=bound.gripper_s,
+            bound_pace_s=bound.pace_s,
             bound_rest_to_rest_motion_s=bound.rest_to_rest_motion_s,
             executed_waypoints=outcome.executed_waypoints,
             executed_rests=outcome.executed_rests,

@@ -9,7 +9,7 @@ a time-optimal jerk-limited (ruckig) rest-to-rest move. The slowest joint's sum 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from itertools import pairwise
 
 import numpy as np
@@ -67,11 +67,23 @@ def through_waypoints_s(path: ArrayLike, limits: JointLimits, scale: float = 1.0
     return slowest
 
 
-def stop_to_stop_s(path: ArrayLike, rests: Sequence[bool], limits: JointLimits, scale: float = 1.0) -> float:
+def stop_to_stop_s(
+    path: ArrayLike,
+    rests: Sequence[bool],
+    limits: JointLimits,
+    scale: float = 1.0,
+    floors: Mapping[int, float] | None = None,
+) -> float:
     """The least duration of a motion through ``path`` that rests at the waypoints ``rests`` flags (and
-    at both ends) and flows through the others: the sum of :func:`through_waypoints_s` over its runs."""
+    at both ends) and flows through the others: the sum of :func:`through_waypoints_s` over its runs.
+    ``floors``: what a move from rest to rest ending at a waypoint needs at least whatever the joints may
+    do (a guarded touch-down's pace), by that waypoint's index; it counts where it is more."""
     p = joint_path(path, limits.dof, "path")
     if len(rests) != p.shape[0]:
         raise InvalidInputError(f"{len(rests)} rest flags for {p.shape[0]} waypoints")
     stops = sorted({0, p.shape[0] - 1, *(i for i, r in enumerate(rests) if r)})
-    return sum(through_waypoints_s(p[a : b + 1], limits, scale) for a, b in pairwise(stops))
+    floor = floors or {}
+    return sum(
+        max(through_waypoints_s(p[a : b + 1], limits, scale), floor.get(b, 0.0) if b == a + 1 else 0.0)
+        for a, b in pairwise(stops)
+    )

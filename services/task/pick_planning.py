@@ -30,7 +30,7 @@ from services.task.moves import (
     with_way_home,
     without_safe_home,
 )
-from services.task.pacing import paced_on_line
+from services.task.pacing import LINE_PACE, TOOL_ACCELERATION_M_S2, LinePace, paced_on_line
 from services.task.placement import free_place_xy, place_candidates
 from services.task.planned import PlannedPick
 from services.task.ports import (
@@ -251,7 +251,7 @@ class PickPlanning:
                 along_line = [
                     float(np.dot((await self.motion.tool_pose(q))[:3, 3] - p0, along)) for q in traj.positions
                 ]
-                return paced_on_line(
+                paced = paced_on_line(
                     traj,
                     np.asarray(along_line),
                     w.guard_approach_speed_m_s,
@@ -259,6 +259,11 @@ class PickPlanning:
                     band_from,
                     max_joint_acceleration=self.config.max_joint_acceleration,
                 )
+                # the caps it went under, for the eval's bound (services.task.recording)
+                paced.meta[LINE_PACE] = LinePace(
+                    w.guard_approach_speed_m_s, w.guard_speed_m_s, band_from, TOOL_ACCELERATION_M_S2
+                )
+                return paced
             # a guarded approach goes no faster than the grasp plan's touch-down speed
             dist = float(np.linalg.norm(move.target[:3, 3] - p0))
             needed = dist / w.guard_speed_m_s

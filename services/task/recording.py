@@ -6,6 +6,7 @@ import numpy as np
 
 from services.kinematics.trajectory import JointTrajectory
 from services.task.moves import joined_at
+from services.task.pacing import LINE_PACE, LinePace
 from services.task.pick_planning import near
 from services.task.ports import GripOutcome, MoveOutcome, RobotPort
 from services.task.states import PickOutcome
@@ -14,7 +15,7 @@ from services.task.states import PickOutcome
 class RecordingRobot:
     """The robot port, recording on the outcome what the cycle executed: the joint waypoints the arm
     went through (each motion's start and its end, or where a guarded one stopped), whether it rested
-    at each, and the gripper actions that moved the jaws."""
+    at each, the pace a guarded line went under, and the gripper actions that moved the jaws."""
 
     def __init__(self, robot: RobotPort, out: PickOutcome):
         self._robot, self._out = robot, out
@@ -39,6 +40,8 @@ class RecordingRobot:
         end = res.final_q if res.stopped_early else traj.positions[-1]
         wps.append([float(v) for v in end])
         rests.append(res.stopped_early or not continues)
+        if force_guard_n > 0 and isinstance(pace := traj.meta.get(LINE_PACE), LinePace):
+            self._out.executed_paces[len(wps) - 1] = pace  # a touch-down takes its time whatever the joints
         return res
 
     async def gripper(self, close: bool, release: bool = False) -> GripOutcome:

@@ -5,6 +5,8 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass, field
 
+from services.task.pacing import LinePace
+
 
 class CycleState(enum.StrEnum):
     IDLE = "IDLE"
@@ -81,6 +83,8 @@ class PickOutcome:
     stage_wall_s: dict[str, float] = field(default_factory=dict)  # the same states in wall time
     executed_waypoints: list[list[float]] = field(default_factory=list)  # joints (rad) the arm went through
     executed_rests: list[bool] = field(default_factory=list)  # per waypoint: the arm came to rest there
+    # per waypoint where a paced guarded line ended (its index above): the caps it went under
+    executed_paces: dict[int, LinePace] = field(default_factory=dict)
     gripper_actions: int = 0
     gripper_releases: int = 0  # of those, opens that let go of a held object (answered when clear of it)
     # what the arm waited for to be computed outside DETECT and PLAN (a held rod measured before the

@@ -14,7 +14,6 @@ from services.apps import evaluation
 from services.apps.eval_journal import TrialJournal, journal_path, read_journal
 from services.apps.evaluation import EvalReport, TrialResult, _TrialRunner
 from services.common.errors import ConfigurationError
-from services.kinematics.trajectory import JointLimits
 from services.task.states import PickOutcome
 from tests.apps.test_evaluation_report import trial
 
@@ -127,7 +126,7 @@ async def test_a_resumed_run_runs_only_the_trials_its_journal_lacks(tmp_path, mo
         task=SimpleNamespace(runner=runner), truth=SimpleNamespace(), reset_scene=reset_scene, vision=vision
     )
     report = EvalReport(task="stand-rod", trials=4, seed=10)
-    trial = _TrialRunner(evaluation.Settings(), "stand-rod", JointLimits.from_spec(_spec()), [])
+    trial = _TrialRunner(evaluation.Settings(), "stand-rod", _spec())
     await trial.run_all(cell, report, 4, 10, None, False, journal)  # type: ignore[arg-type]
     journal.close()
 

@@ -51,6 +51,11 @@ async def test_eval_two_trials_reports_ground_truth_on_the_controller_clock(tmp_
         assert len(r.executed_rests) == len(r.executed_waypoints) and not all(r.executed_rests)
         assert r.bound_motion_s is not None and r.bound_rest_to_rest_motion_s is not None
         assert r.bound_motion_s < r.bound_rest_to_rest_motion_s
+        # a touch-down's slow band takes longer than the joints need for its few centimetres: charged
+        assert r.bound_pace_s is not None and r.bound_gripper_s is not None
+        assert r.bound_s == pytest.approx(r.bound_motion_s + r.bound_pace_s + r.bound_gripper_s)
+        if r.success:
+            assert r.bound_pace_s > 0.05
     # the first trial's release left the jaws open: the second's open ahead of its grasp sends nothing
     # and the bound charges it nothing (a close and a release only)
     second, g = report.results[1], s.gripper

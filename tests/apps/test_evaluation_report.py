@@ -116,3 +116,24 @@ def test_the_bound_rests_where_the_arm_rested_and_counts_a_release_at_its_time()
     assert flowed.rest_to_rest_motion_s == pytest.approx(stopped.rest_to_rest_motion_s)
     assert flowed.gripper_s == pytest.approx(0.4 + 0.12) and stopped.gripper_s == pytest.approx(0.8)
     assert flowed.total_s == pytest.approx(flowed.motion_s + flowed.gripper_s)
+
+
+def test_the_bound_charges_a_touch_down_its_pace_where_the_joints_could_go_faster():
+    from services.apps.evaluation import line_floors
+    from services.kinematics import analytic
+    from services.task.pacing import LinePace
+
+    limits, names = JointLimits.from_spec(NOVA5), list(NOVA5.joint_names)
+    home = np.deg2rad([180.0, 30.0, 90.0, 0.0, -90.0, 0.0])
+    # a small joint-2 step: a few centimetres of tool travel, which the joints do in a fraction of a second
+    wps = [home.tolist(), (home + np.deg2rad([0, 3, 0, 0, 0, 0])).tolist()]
+    ends = analytic.fk(NOVA5, np.asarray(wps))[:, :3, 3]
+    travel = float(np.linalg.norm(ends[1] - ends[0]))
+    pace = LinePace(0.2, 0.025, travel - 0.006, 1.0)
+    floors = line_floors(wps, {1: pace}, NOVA5)
+    assert floors == {1: pytest.approx(pace.least_s(travel))}
+    joints = execution_bound(wps, [True, True], limits, names, 0, 0.4)
+    paced = execution_bound(wps, [True, True], limits, names, 0, 0.4, line_floors=floors)
+    assert paced.motion_s == pytest.approx(joints.motion_s) and joints.pace_s == 0.0
+    assert paced.pace_s == pytest.approx(floors[1] - joints.motion_s) and paced.pace_s > 0.2
+    assert paced.total_s == pytest.approx(floors[1])

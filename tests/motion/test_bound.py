@@ -68,3 +68,17 @@ def test_no_motion_through_the_waypoints_within_the_limits_is_faster(seed: int):
 def test_rest_flags_must_match_the_waypoints():
     with pytest.raises(InvalidInputError, match="2 rest flags for 3 waypoints"):
         stop_to_stop_s(_base_moves(0, 10, 20), [True, True], LIMITS)
+
+
+def test_a_floor_counts_for_a_move_from_rest_to_rest_where_it_is_more():
+    path = _base_moves(0, 40, 10)
+    joints = stop_to_stop_s(path, [True, True, True], LIMITS)
+    slow_second = _base_alone(40, 10) + 0.5
+    assert stop_to_stop_s(path, [True, True, True], LIMITS, floors={2: slow_second}) == pytest.approx(
+        _base_alone(0, 40) + slow_second
+    )
+    assert stop_to_stop_s(path, [True, True, True], LIMITS, floors={2: 0.01}) == pytest.approx(joints)
+    # flowed into from a move before it: not from rest, so its floor does not hold there
+    assert stop_to_stop_s(path, [True, False, True], LIMITS, floors={2: 10.0}) == pytest.approx(
+        stop_to_stop_s(path, [True, False, True], LIMITS)
+    )

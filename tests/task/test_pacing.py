@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from services.kinematics.trajectory import JointTrajectory
 from services.task.pacing import acceleration_ratio, paced_on_line
@@ -71,3 +72,27 @@ def test_a_pace_within_the_limits_is_left_as_it_is() -> None:
         max_joint_acceleration=np.array([1e3, 1e3]),
     )
     assert np.array_equal(kept.times, free.times) and np.array_equal(kept.velocities, free.velocities)
+
+
+def test_the_least_time_of_a_paced_line_is_its_two_speeds_and_the_changes_between() -> None:
+    from services.task.pacing import LinePace
+
+    pace = LinePace(approach_m_s=0.2, touch_m_s=0.025, band_from_m=0.09, accel_m_s2=1.0)
+    # 0 → 0.2 m/s over 20 mm (0.2 s), 50.3 mm at 0.2 m/s, down to 0.025 m/s over 19.7 mm by the band
+    # (0.175 s), then the band's 10 mm at 0.025 m/s (0.4 s): reached at the touch speed, not stopped
+    assert pace.least_s(0.1) == pytest.approx(0.2 + 0.0503125 / 0.2 + 0.175 + 0.4, rel=2e-3)
+    # stopped before the band (a table higher than seen): only the way there counts
+    assert pace.least_s(0.05) < pace.least_s(0.09) < pace.least_s(0.1)
+    # a line slow all the way: up to the touch speed (0.3 mm), then at it
+    slow = LinePace(approach_m_s=0.2, touch_m_s=0.025, band_from_m=0.0, accel_m_s2=1.0)
+    assert slow.least_s(0.01) == pytest.approx(0.025 + (0.01 - 0.0003125) / 0.025, rel=2e-3)
+    assert pace.least_s(0.0) == 0.0 and pace.least_s(float("nan")) == 0.0
+
+
+def test_a_paced_line_takes_no_less_than_its_least_time() -> None:
+    from services.task.pacing import LinePace
+
+    traj, d = _line(n=201, length=0.05, duration=0.2)
+    paced = paced_on_line(traj, d, approach_m_s=0.15, touch_m_s=0.025, band_from_m=0.03)
+    least = LinePace(0.15, 0.025, 0.03, 1.0).least_s(0.05)
+    assert least <= paced.duration <= least * 1.05

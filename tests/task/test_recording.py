@@ -60,3 +60,23 @@ async def test_flowing_moves_record_their_planned_ends_and_a_guarded_stop_where_
     assert g.unchanged and out.gripper_actions == 2 and out.gripper_releases == 1
     await robot.gripper(True)
     assert out.gripper_actions == 3
+
+
+async def test_a_paced_touch_down_records_the_pace_it_went_under():
+    from services.task.pacing import LINE_PACE, LinePace
+
+    a, b, c = _q(0, 0, 0), _q(0.5, 0, 0), _q(0.5, 0, -0.2)
+    stopped = _q(0.5, 0, -0.15)
+    out = PickOutcome(pick_id="p", task="stand-rod", object_class="rod")
+    arm = _Arm(MoveOutcome(b, 0.5), MoveOutcome(stopped, 0.4, stopped_early=True), MoveOutcome(a, 0.5))
+    robot = RecordingRobot(arm, out)  # type: ignore[arg-type]
+    pace = LinePace(0.2, 0.025, 0.03, 1.0)
+    down = line(b, c)
+    down.meta[LINE_PACE] = pace
+    up = line(stopped, a)
+    up.meta[LINE_PACE] = pace  # unguarded: its pace is no touch-down's
+    await robot.execute(line(a, b))
+    await robot.execute(down, 0.6)
+    await robot.execute(up)
+    assert np.allclose(out.executed_waypoints, [a, b, stopped, a])
+    assert out.executed_paces == {2: pace}  # at the waypoint where the guarded line ended
