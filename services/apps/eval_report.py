@@ -161,6 +161,8 @@ def print_report(report: EvalReport, console: Console) -> None:
     ratio, ratio95 = s["bound_ratio_median"], s["bound_ratio_p95"]
     if ratio is not None and ratio95 is not None:
         t.add_row("measured / bound (median / p95)", f"{ratio:.2f} / {ratio95:.2f}")
+    if (unjerked := s["accel_limited_bound_ratio_median"]) is not None:
+        t.add_row("measured / bound without the jerk limit (median)", f"{unjerked:.2f}")
     tilts = [r.tilt_before_release_deg for r in report.results if r.tilt_before_release_deg is not None]
     if tilts:
         t.add_row(

@@ -44,7 +44,7 @@ import tempfile
 import time
 from collections import Counter
 from collections.abc import Iterator, Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import TypedDict
 
 import numpy as np
@@ -110,6 +110,7 @@ class TrialResult:
     bound_motion_s: float | None = None
     bound_gripper_s: float | None = None
     bound_pace_s: float | None = None  # guarded lines' tool pace beyond the joints' time (touch-downs)
+    bound_accel_limited_s: float | None = None  # the bound without the jerk limit (ExecutionBound)
     bound_rest_to_rest_motion_s: float | None = None  # the motion resting at every waypoint
     executed_waypoints: list[list[float]] = field(default_factory=list)  # rad
     executed_rests: list[bool] = field(default_factory=list)  # per waypoint: the arm rested there
@@ -144,6 +145,7 @@ class EvalSummary(TypedDict):
     bound_pace_median_s: float | None  # of the bound: touch-downs' pace beyond the joints' time
     bound_ratio_median: float | None
     bound_ratio_p95: float | None
+    accel_limited_bound_ratio_median: float | None  # against the bound without the jerk limit
     stage_median_s: dict[str, float]
     failures: dict[str, int]
     sim_speed_achieved: float | None
@@ -183,6 +185,7 @@ class EvalReport:
         ratios = [x for r in ok if (x := r.bound_ratio) is not None]
         bounds = [r.bound_s for r in ok if r.bound_s is not None]
         paces = [r.bound_pace_s for r in ok if r.bound_pace_s is not None]
+        unjerked = [r.cycle_time_s / r.bound_accel_limited_s for r in ok if r.bound_accel_limited_s]
         fails = Counter(
             f"{r.stage_reached}: {r.error_code or 'ground truth'}" for r in self.results if not r.success
         )
@@ -211,6 +214,7 @@ class EvalReport:
             "bound_pace_median_s": statistics.median(paces) if paces else None,
             "bound_ratio_median": statistics.median(ratios) if ratios else None,
             "bound_ratio_p95": _p95(ratios),
+            "accel_limited_bound_ratio_median": statistics.median(unjerked) if unjerked else None,
             "stage_median_s": self.stage_medians(),
             "failures": dict(fails.most_common()),
             "sim_speed_achieved": self.sim_speed_achieved,
@@ -244,6 +248,9 @@ class ExecutionBound:
     gripper_s: float
     rest_to_rest_motion_s: float  # resting at every waypoint (ruckig, all joints in step)
     pace_s: float = 0.0  # what guarded lines need beyond motion_s at their tool pace (touch-downs)
+    # the same without the jerk limit, which lines are timed without (services.motion.planner): what
+    # no motion the driver lets through (speed and acceleration checked) can beat
+    accel_limited_s: float = 0.0
 
     @property
     def total_s(self) -> float:
@@ -272,14 +279,15 @@ def execution_bound(
     from services.motion.timing import rest_to_rest
 
     if len(waypoints) < 2:
-        motion = each = paced = 0.0
+        motion = each = paced = unjerked = 0.0
     else:
         each = rest_to_rest(waypoints, limits, joint_names).duration
         flags = rests if len(rests) == len(waypoints) else [True] * len(waypoints)
         motion = stop_to_stop_s(waypoints, flags, limits)
         paced = stop_to_stop_s(waypoints, flags, limits, floors=line_floors) if line_floors else motion
+        unjerked = stop_to_stop_s(waypoints, flags, replace(limits, max_jerk=None), floors=line_floors)
     gripper = (gripper_actions - releases) * actuation_s + releases * release_s
-    return ExecutionBound(motion, gripper, each, paced - motion)
+    return ExecutionBound(motion, gripper, each, paced - motion, unjerked + gripper)
 
 
 def line_floors(
@@ -496,6 +504,7 @@ class _TrialRunner:
             bound_motion_s=bound.motion_s,
             bound_gripper_s=bound.gripper_s,
             bound_pace_s=bound.pace_s,
+            bound_accel_limited_s=bound.accel_limited_s,
             bound_rest_to_rest_motion_s=bound.rest_to_rest_motion_s,
             executed_waypoints=outcome.executed_waypoints,
             executed_rests=outcome.executed_rests,

@@ -56,6 +56,7 @@ async def test_eval_two_trials_reports_ground_truth_on_the_controller_clock(tmp_
         assert r.bound_s == pytest.approx(r.bound_motion_s + r.bound_pace_s + r.bound_gripper_s)
         if r.success:
             assert r.bound_pace_s > 0.05
+        assert r.bound_accel_limited_s is not None and r.bound_gripper_s < r.bound_accel_limited_s < r.bound_s
     # the first trial's release left the jaws open: the second's open ahead of its grasp sends nothing
     # and the bound charges it nothing (a close and a release only)
     second, g = report.results[1], s.gripper

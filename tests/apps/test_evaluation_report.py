@@ -116,6 +116,8 @@ def test_the_bound_rests_where_the_arm_rested_and_counts_a_release_at_its_time()
     assert flowed.rest_to_rest_motion_s == pytest.approx(stopped.rest_to_rest_motion_s)
     assert flowed.gripper_s == pytest.approx(0.4 + 0.12) and stopped.gripper_s == pytest.approx(0.8)
     assert flowed.total_s == pytest.approx(flowed.motion_s + flowed.gripper_s)
+    # what the driver checks (speed and acceleration) allows less, never more
+    assert flowed.gripper_s < flowed.accel_limited_s < flowed.total_s
 
 
 def test_the_bound_charges_a_touch_down_its_pace_where_the_joints_could_go_faster():
@@ -137,3 +139,5 @@ def test_the_bound_charges_a_touch_down_its_pace_where_the_joints_could_go_faste
     assert paced.motion_s == pytest.approx(joints.motion_s) and joints.pace_s == 0.0
     assert paced.pace_s == pytest.approx(floors[1] - joints.motion_s) and paced.pace_s > 0.2
     assert paced.total_s == pytest.approx(floors[1])
+    # without the jerk limit the joints go faster still; the touch-down's pace does not
+    assert joints.accel_limited_s < joints.total_s and paced.accel_limited_s == pytest.approx(floors[1])
