@@ -480,6 +480,18 @@ class Orchestrator:
                     # the touch-down goes turned as the rod was, from where the turn left the arm
                     q_known, w = q_turned, plan.waypoints[i]
                     traj = await self._replan_run(planned, i, q_turned, f"planning {w.name} turned")
+            if (
+                traj is None
+                and i != along
+                and not in_motion
+                and not self._progress.reached
+                and move_to(plan, i)
+            ):
+                # planned as reached already (the pre-grasp where the set-off ends): unless the arm
+                # stopped short of it (an alarm on the way), there is nothing to do
+                q_known = q_known if q_known is not None else await self.robot.joints()
+                if np.max(np.abs(w.joints - q_known)) > RESUME_TOLERANCE_RAD:
+                    traj = await self._replan_run(planned, i, q_known, f"replanning {w.name}")
             if traj is not None and not self._progress.reached and not in_motion:
                 # the arm is at rest: jaws that open at a waypoint it will pass without stopping open now
                 await self._open_ahead(planned, i)

@@ -118,6 +118,48 @@ def safe_home_of(plan: GraspPlan) -> np.ndarray | None:
     return first.joints.copy() if first is not None and first.name == SAFE_HOME else None
 
 
+# where the set-off ends counts as on the grasp's approach line (the pre-grasp's turn, off the line, along
+# it from the pre-grasp, and the joints from the pre-grasp's: the same arm branch)
+ON_LINE_RAD = np.deg2rad(0.1)
+ON_LINE_M = 0.0005
+ON_LINE_ALONG_M = 0.02
+ON_LINE_JOINTS_RAD = np.deg2rad(3.0)
+
+
+def pre_grasp_at(plan: GraspPlan, q: np.ndarray, T_q: np.ndarray) -> GraspPlan:
+    """The plan with its pre-grasp where the arm is (joints ``q``, tool pose ``T_q``: where the set-off
+    ends) when that lies on the grasp's approach line, turned as the pre-grasp and within
+    ``ON_LINE_ALONG_M`` of it: the approach then starts there. Unchanged otherwise. Seen: the set-off
+    ends 2-7 mm below or above the pre-grasp (the grasp's height is the fingertips' over the table, not
+    the rod's axis), and the move along the line between, 0.1-0.2 s, turned joints back on their way."""
+    if (
+        len(plan.waypoints) < 2
+        or plan.waypoints[0].motion is not MotionKind.JOINT
+        or not grasp_approach(plan, 1)
+    ):
+        return plan
+    pre, grasp = plan.waypoints[0], plan.waypoints[1]
+    p_pre, p_grasp = pre.T_base_tool[:3, 3], grasp.T_base_tool[:3, 3]
+    length = float(np.linalg.norm(p_grasp - p_pre))
+    if length <= 2 * ON_LINE_ALONG_M:
+        return plan
+    d = (p_grasp - p_pre) / length
+    off = np.asarray(T_q[:3, 3], dtype=float) - p_pre
+    along = float(off @ d)
+    turn = np.clip((np.trace(pre.T_base_tool[:3, :3].T @ T_q[:3, :3]) - 1) / 2, -1.0, 1.0)
+    if (
+        abs(along) > ON_LINE_ALONG_M
+        or float(np.linalg.norm(off - along * d)) > ON_LINE_M
+        or float(np.arccos(turn)) > ON_LINE_RAD
+        or float(np.max(np.abs(np.asarray(q) - pre.joints))) > ON_LINE_JOINTS_RAD
+    ):
+        return plan
+    at_arm = replace(
+        pre, T_base_tool=np.asarray(T_q, dtype=float).copy(), joints=np.asarray(q, dtype=float).copy()
+    )
+    return replace(plan, waypoints=[at_arm, *plan.waypoints[1:]])
+
+
 def without_safe_home(plan: GraspPlan) -> GraspPlan:
     """The plan without its move to the safe home: the arm goes straight to the pre-grasp."""
     if not plan.waypoints or plan.waypoints[0].name != SAFE_HOME:
@@ -186,6 +228,13 @@ def rod_box(rod: SeenRod) -> SeenBox:
     lo, hi = ends.min(axis=0) - r, ends.max(axis=0) + r
     lo[2] = min(lo[2], 0.0)
     return SeenBox(lo, hi)
+
+
+def horizontal(v: np.ndarray) -> np.ndarray:
+    """``v`` levelled (its z dropped) and of unit length: the way a rod lying on the table runs."""
+    h = np.array([float(v[0]), float(v[1]), 0.0])
+    n = float(np.linalg.norm(h))
+    return h / n if n > 1e-9 else h
 
 
 def above_pose(

@@ -20,10 +20,12 @@ from services.task.moves import (
     above_pose,
     blends,
     box_around,
+    horizontal,
     move_to,
     object_id,
     park_pose,
     pose_list,
+    pre_grasp_at,
     rod_box,
     rounds,
     safe_home_of,
@@ -42,6 +44,7 @@ from services.task.ports import (
     Observation,
     PlannedWaypoint,
     SeenBox,
+    SeenCube,
     SeenRod,
 )
 from services.task.states import PickOutcome
@@ -73,8 +76,10 @@ class PickPlanning:
         ):
             return None
         R_now = (await self.motion.tool_pose(q))[:3, :3]
-        if task is TaskKind.STAND_ROD:  # the jaws across the rod
-            T = above_pose(obs.rods[0].center, height, R_now, across=obs.rods[0].axis)
+        if task is TaskKind.STAND_ROD:  # the jaws across the rod, above where its first option grasps it
+            rod = obs.rods[0]
+            offset = self._rod_offsets(rod, self._obstacles(obs, q, None))[0]
+            T = above_pose(rod.center + offset * horizontal(rod.axis), height, R_now, across=rod.axis)
         else:  # the jaws turned as they are: the cube's faces are not known here
             T = above_pose(obs.cubes[0].centroid, height, R_now)
         everything = (
@@ -110,36 +115,16 @@ class PickPlanning:
         turn. Cubes: each seen cube in turn (one that cannot be picked now, hemmed in by its neighbours,
         waits until they are sorted), then each one's next-best grasp. ``seen_from``: where the arm stood
         for the picture when it has set off since (it then goes from ``q`` straight to the pre-grasp)."""
-        # everything on the table that is not the target is an obstacle for the carried object too
         target_cube = (
             obs.cubes[alternative % len(obs.cubes)] if task is TaskKind.SORT_CUBES and obs.cubes else None
         )
-        obstacles = (
-            self.not_the_arm(obs.obstacles, q if seen_from is None else seen_from)
-            + tuple(
-                box_around(c.centroid, c.size / 2 + OBJECT_MARGIN_M)
-                for c in obs.cubes
-                if c is not target_cube
-            )
-            + tuple(box_around(r.center, r.length / 2 + OBJECT_MARGIN_M) for r in obs.rods[1:])
-        )
+        obstacles = self._obstacles(obs, q if seen_from is None else seen_from, target_cube)
         rod: SeenRod | None = None
         offset = 0.0
         if task is TaskKind.STAND_ROD:
             rod = obs.rods[0]
             place = self._place(replace(obs, obstacles=obstacles))
-            # recovery options: grasp the rod at other points along it (a neighbour may block the
-            # fingers at its centre; the twin notes show ±50 mm off-centre still stands the rod, and
-            # ±75 mm (pads 14 mm inside the end) was seen to stand it in eval)
-            cfg = self.config
-            offsets = order_offsets(
-                cfg.grasp_offsets_m,
-                rod.center,
-                rod.axis,
-                obstacles,
-                *cfg.jaw_footprint_m,
-                cfg.jaw_clearance_m,
-            )
+            offsets = self._rod_offsets(rod, obstacles)
             offset = offsets[alternative % len(offsets)]
             # once every offset failed on the cheapest IK branches, costlier branches may be taken too
             plan = await self.grasp.plan_rod(
@@ -167,6 +152,8 @@ class PickPlanning:
         if home is not None and not near(q, home) and (seen_from is not None or self.clear(q)):
             # out of the camera's view already, or on the way to the object: straight to the pre-grasp
             plan = without_safe_home(plan)
+        if seen_from is not None:  # set off: where that move ends may be on the approach already
+            plan = pre_grasp_at(plan, q, await self.motion.tool_pose(q))
         if home is not None:
             # back only as far as the first pose that leaves the camera's view clear for the next look
             end = plan.waypoints[-1].joints
@@ -292,6 +279,30 @@ class PickPlanning:
     ) -> JointTrajectory | None:
         (traj,) = await self.motion.plan_moves(start, [move], obstacles)
         return traj
+
+    def _obstacles(
+        self, obs: Observation, q_seen: np.ndarray, target_cube: SeenCube | None
+    ) -> tuple[SeenBox, ...]:
+        """Everything on the table that is not the target (``target_cube``, or the first rod): an
+        obstacle for the carried object too. ``q_seen``: where the arm stood for the picture."""
+        return (
+            self.not_the_arm(obs.obstacles, q_seen)
+            + tuple(
+                box_around(c.centroid, c.size / 2 + OBJECT_MARGIN_M)
+                for c in obs.cubes
+                if c is not target_cube
+            )
+            + tuple(box_around(r.center, r.length / 2 + OBJECT_MARGIN_M) for r in obs.rods[1:])
+        )
+
+    def _rod_offsets(self, rod: SeenRod, obstacles: tuple[SeenBox, ...]) -> tuple[float, ...]:
+        """Where along the rod to grasp it, in the order to try: the options of recovery too (a neighbour
+        may block the fingers at its centre; the twin notes show ±50 mm off-centre still stands the rod,
+        and ±75 mm (pads 14 mm inside the end) was seen to stand it in eval)."""
+        cfg = self.config
+        return order_offsets(
+            cfg.grasp_offsets_m, rod.center, rod.axis, obstacles, *cfg.jaw_footprint_m, cfg.jaw_clearance_m
+        )
 
     def not_the_arm(self, boxes: tuple[SeenBox, ...], q: np.ndarray) -> tuple[SeenBox, ...]:
         """The boxes vision saw, without those that are the arm itself where it stood for the picture. At

@@ -33,19 +33,21 @@ async def test_the_arm_sets_off_above_the_rod_and_the_grasp_plans_from_there() -
     cell = FakeCell(FakeVision(seen(rod)), config=_config())
     outcome = await cell.run(TaskKind.STAND_ROD)
     assert outcome.success
-    # the set-off first, then straight on to the pre-grasp: no way back to the safe home first
-    assert cell.moves()[:3] == [SET_OFF, "PRE_GRASP", "GRASP"]
+    # the set-off first, no way back to the safe home; it ends on the grasp's approach line, 11 mm above
+    # the pre-grasp: the approach starts there, without a move of its own to the pre-grasp
+    assert cell.moves()[:2] == [SET_OFF, "GRASP"]
     above = joints_at([0.5, 0.1, 0.011 + HEIGHT])
     assert np.allclose(cell.robot.reached[SET_OFF], above)
     (call,) = cell.grasp.calls
     assert np.allclose(call.q_now, above)  # planned from where the set-off ends
+    first = cell.motion.labelled(["PRE_GRASP", "GRASP"])
+    assert np.allclose(first.start, above) and np.allclose(first.moves[0].target, above)  # already there
     # the set-off's scene holds the rod itself (the target is no obstacle of the grasp's own moves)
     set_off = cell.motion.labelled([SET_OFF])
     (move,) = set_off.moves
     assert np.allclose(move.target[:3, :3] @ [0.0, 0.0, 1.0], [0.0, 0.0, -1.0])  # the tool straight down
     assert abs(float(move.target[:3, 1] @ rod.axis)) < 1e-9  # the jaws across the rod
     assert any(np.all(b.min <= rod.center) and np.all(rod.center <= b.max) for b in set_off.obstacles)
-    first = cell.motion.requests[1]
     assert not any(np.all(b.min <= rod.center) and np.all(rod.center <= b.max) for b in first.obstacles)
     # planning the set-off is PLAN; the arm on its way is APPROACH
     assert cell.states[:4] == [CycleState.INIT, CycleState.DETECT, CycleState.PLAN, CycleState.APPROACH]
@@ -138,3 +140,54 @@ async def test_a_safety_stop_on_the_way_is_raised_without_waiting_for_the_plan()
     with pytest.raises(EmergencyStopError):
         await asyncio.wait_for(cell.run(TaskKind.STAND_ROD), 60)  # fails rather than hangs
     assert cell.states[-1] is CycleState.ESTOP and not grasp.calls
+
+
+async def test_the_set_off_aims_above_where_the_first_option_grasps_a_rod() -> None:
+    from services.task.ports import Observation, SeenBox
+
+    rod = rod_at(0.5, 0.1)
+    # a small box just beside the rod's centre: the open jaws would come down on it there
+    box = SeenBox(np.array([0.495, 0.16, 0.0]), np.array([0.505, 0.17, 0.01]))
+    cell = FakeCell(FakeVision(Observation(rods=(rod,), obstacles=(box,))), config=_config())
+    outcome = await cell.run(TaskKind.STAND_ROD)
+    assert outcome.success
+    first_offset = cell.grasp.calls[0].grasp_offset_m
+    assert first_offset == pytest.approx(0.035)  # the centre is blocked: the nearest clear offset
+    (move,) = cell.motion.labelled([SET_OFF]).moves
+    assert np.allclose(move.target[:3, 3], [0.5 + first_offset, 0.1, 0.011 + HEIGHT])
+    # and so it ends on that grasp's approach line: no move of its own to the pre-grasp
+    assert cell.moves()[:2] == [SET_OFF, "GRASP"]
+
+
+def test_the_pre_grasp_is_where_the_set_off_ends_only_on_the_approach_line() -> None:
+    from services.common.modes import GripperCommand, MotionKind
+    from services.task.moves import pre_grasp_at
+    from tests.task.fakes import _wp, tool_pose_of
+
+    plan = GraspPlan(
+        TaskKind.STAND_ROD,
+        [
+            _wp("PRE_GRASP", MotionKind.JOINT, (0.5, 0.1, 0.10), gripper=GripperCommand.OPEN),
+            _wp("GRASP", MotionKind.LINEAR, (0.5, 0.1, 0.02), gripper=GripperCommand.CLOSE),
+            _wp("LIFT", MotionKind.LINEAR, (0.5, 0.1, 0.20), holding=True),
+        ],
+        0.8,
+        None,
+        np.zeros(3),
+    )
+
+    def at(p: tuple[float, float, float], turn_deg: float = 0.0) -> GraspPlan:
+        q = joints_at(p)
+        T = tool_pose_of(q)
+        c, s = np.cos(np.deg2rad(turn_deg)), np.sin(np.deg2rad(turn_deg))
+        T[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
+        return pre_grasp_at(plan, q, T)
+
+    moved = at((0.5, 0.1, 0.105))  # 5 mm above the pre-grasp, on its line down
+    assert np.allclose(moved.waypoints[0].joints, joints_at((0.5, 0.1, 0.105)))
+    assert np.allclose(moved.waypoints[0].T_base_tool[:3, 3], [0.5, 0.1, 0.105])
+    assert moved.waypoints[0].gripper is GripperCommand.OPEN and moved.waypoints[1:] == plan.waypoints[1:]
+    assert at((0.5, 0.1, 0.095)).waypoints[0].joints[2] == pytest.approx(0.095)  # 5 mm below it too
+    # off the line, turned otherwise, or too far along it: the pre-grasp stays the plan's
+    for off in (at((0.501, 0.1, 0.105)), at((0.5, 0.1, 0.105), turn_deg=0.5), at((0.5, 0.1, 0.13))):
+        assert off is plan
