@@ -12,13 +12,15 @@ which the simulator keeps in sim time whatever the machine's load), the compute 
 the critical path (DETECT + PLAN) in wall time beside it, and the bound: the
 time-optimal jerk-limited (ruckig) duration of the executed joint waypoints at the
 robot's limits, resting where the arm rested and flowing through the rest (each joint on its own,
-stopping only where it turns back: ``services.motion.bound``), a guarded touch-down no faster than its
-tool pace allows (``services.task.pacing.LinePace``: the approach speed above its slow band, the touch
-speed through it, the tool's speed changes between; ``bound_pace_s`` is what that adds), plus the
-gripper's actuation time per action (its release time for an open that lets go of the placed
-object). Beside it, the same waypoints at rest at each (``bound_rest_to_rest_motion_s``). Of the compute, the twin camera rendering the
-frames the cycle waited for is told apart (``camera_wall_s``): on this machine's CPU it is most of
-DETECT, where a real camera streams its frames.
+at zero speed only where it turns back, swinging through: ``services.motion.bound``), a guarded
+touch-down no faster than its tool pace allows (``services.task.pacing.LinePace``: the approach speed
+above its slow band, the touch speed through it, the tool's speed changes between; ``bound_pace_s`` is
+what that adds), plus the gripper's actuation time per action (its release time for an open that lets
+go of the placed object). Beside it, the same waypoints at rest at each
+(``bound_rest_to_rest_motion_s``), and the bound without the jerk limit (``bound_accel_limited_s``:
+straight lines are timed without it, so it is what no motion the driver lets through can beat). Of
+the compute, the twin camera rendering the frames the cycle waited for is told apart
+(``camera_wall_s``): on this machine's CPU it is most of DETECT, where a real camera streams its frames.
 ``load`` runs that many busy processes beside the cell (always ended with the run).
 A trial whose harness fails (a scene that cannot be laid out, an exception) is
 recorded as a harness error with its reason, and the run goes on.

@@ -485,7 +485,7 @@ class Orchestrator:
                 and i != along
                 and not in_motion
                 and not self._progress.reached
-                and move_to(plan, i)
+                and move_to(plan, i) is not None
             ):
                 # planned as reached already (the pre-grasp where the set-off ends): unless the arm
                 # stopped short of it (an alarm on the way), there is nothing to do
