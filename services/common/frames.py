@@ -40,6 +40,12 @@ def finite_vector(v: ArrayLike, n: int | None, name: str) -> Array:
     return arr
 
 
+def rotation_angle_rad(R_a: ArrayLike, R_b: ArrayLike) -> float:
+    """The angle of the rotation that turns ``R_a`` into ``R_b`` (3×3 rotation matrices), 0..π."""
+    R_rel = np.asarray(R_a, dtype=float).T @ np.asarray(R_b, dtype=float)
+    return float(np.arccos(np.clip((np.trace(R_rel) - 1.0) / 2.0, -1.0, 1.0)))
+
+
 def tilt_from_vertical_deg(axis: ArrayLike) -> float:
     """Angle between ``axis`` (either way along it) and the vertical, 0..90°."""
     a = np.asarray(axis, dtype=float).reshape(3)

@@ -41,7 +41,7 @@ from services.common.errors import (
     InvalidInputError,
     PlanningError,
 )
-from services.common.frames import finite_vector, invert_transform, tool_rotation
+from services.common.frames import finite_vector, invert_transform, rotation_angle_rad, tool_rotation
 from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.common.settings import GraspSettings
 from services.grasp.force_closure import evaluate_force_closure
@@ -350,7 +350,7 @@ def _build_options(
                 transit_len = max(transit_len, float(np.linalg.norm(T_carry[:3, 3] - T_turn[:3, 3])))
                 drop_len = max(drop_len, float(T_carry[2, 3] - T_above[2, 3]))
                 o = _Option(s, eps, heading, poses, held)
-                turn = math.degrees(np.arccos(np.clip((np.trace(R_grasp.T @ R_final) - 1) / 2, -1.0, 1.0)))
+                turn = math.degrees(rotation_angle_rad(R_grasp, R_final))
                 if turn > MAX_TURN_DEG:  # the shorter way round is ambiguous near 180°
                     o.reason, o.kind = f"a {turn:.0f}° turn (limit {MAX_TURN_DEG:.0f}°) at REORIENT", "turn"
                 options.append(o)

@@ -24,7 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import lapack
 
 from services.common.errors import ConfigurationError, IKFailureError, InvalidInputError
-from services.common.frames import invert_transform
+from services.common.frames import invert_transform, rotation_angle_rad
 from services.kinematics import analytic
 from services.kinematics.analytic import KinematicModel
 from services.kinematics.poses import check_pose, pose_text
@@ -229,8 +229,7 @@ class Kinematics:
     def pose_error(self, q: ArrayLike, T_base_tool: Array) -> tuple[float, float]:
         """(position error m, rotation error rad) of the tool at q against a target."""
         T = self.fk(q)
-        dR = T[:3, :3].T @ T_base_tool[:3, :3]
-        angle = math.acos(max(-1.0, min(1.0, (np.trace(dR) - 1.0) / 2.0)))
+        angle = rotation_angle_rad(T[:3, :3], T_base_tool[:3, :3])
         return float(np.linalg.norm(T[:3, 3] - T_base_tool[:3, 3])), angle
 
     # --- inverse ------------------------------------------------------------------------------

@@ -44,27 +44,25 @@ def one_joint_move_s(start: float, goal: float, v_max: float, a_max: float, j_ma
     ``j_max`` is given."""
     if abs(goal - start) <= STILL_RAD:
         return 0.0
-    inp = InputParameter(1)
-    inp.current_position, inp.target_position = [start], [goal]
-    inp.current_velocity = inp.current_acceleration = [0.0]
-    inp.target_velocity = inp.target_acceleration = [0.0]
-    inp.max_velocity, inp.max_acceleration = [v_max], [a_max]
-    if j_max is not None:
-        inp.max_jerk = [j_max]
-    tr = Trajectory(1)
-    if Ruckig(1).calculate(inp, tr) not in (Result.Working, Result.Finished):
+    t = _swing_s(start, 0.0, goal, 0.0, v_max, a_max, j_max)
+    if not np.isfinite(t):
         raise TrajectoryLimitError(f"ruckig could not time a joint move {start} → {goal}")
-    return float(tr.duration)
+    return t
 
 
-def _swing_s(x0: float, a0: float, x1: float, a1: float, v_max: float, a_max: float, j_max: float) -> float:
-    """The time-optimal jerk-limited move of one joint from ``x0`` to ``x1``, at zero speed at both
-    ends with the accelerations ``a0`` and ``a1`` there (inf where ruckig finds none)."""
+def _swing_s(
+    x0: float, a0: float, x1: float, a1: float, v_max: float, a_max: float, j_max: float | None
+) -> float:
+    """The time-optimal move of one joint (ruckig) from ``x0`` to ``x1``, at zero speed at both ends
+    with the accelerations ``a0`` and ``a1`` there, jerk-limited when ``j_max`` is given (inf where
+    ruckig finds none)."""
     inp = InputParameter(1)
     inp.current_position, inp.target_position = [x0], [x1]
     inp.current_velocity = inp.target_velocity = [0.0]
     inp.current_acceleration, inp.target_acceleration = [a0], [a1]
-    inp.max_velocity, inp.max_acceleration, inp.max_jerk = [v_max], [a_max], [j_max]
+    inp.max_velocity, inp.max_acceleration = [v_max], [a_max]
+    if j_max is not None:
+        inp.max_jerk = [j_max]
     tr = Trajectory(1)
     if Ruckig(1).calculate(inp, tr) not in (Result.Working, Result.Finished):
         return float("inf")

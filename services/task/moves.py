@@ -8,7 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from services.common.frames import make_transform, matrix_to_quat_xyzw, tool_rotation
+from services.common.frames import make_transform, matrix_to_quat_xyzw, rotation_angle_rad, tool_rotation
 from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.kinematics.trajectory import JointTrajectory
 from services.task.plan import state_for
@@ -146,11 +146,10 @@ def pre_grasp_at(plan: GraspPlan, q: np.ndarray, T_q: np.ndarray) -> GraspPlan:
     d = (p_grasp - p_pre) / length
     off = np.asarray(T_q[:3, 3], dtype=float) - p_pre
     along = float(off @ d)
-    turn = np.clip((np.trace(pre.T_base_tool[:3, :3].T @ T_q[:3, :3]) - 1) / 2, -1.0, 1.0)
     if (
         abs(along) > ON_LINE_ALONG_M
         or float(np.linalg.norm(off - along * d)) > ON_LINE_M
-        or float(np.arccos(turn)) > ON_LINE_RAD
+        or rotation_angle_rad(pre.T_base_tool[:3, :3], T_q[:3, :3]) > ON_LINE_RAD
         or float(np.max(np.abs(np.asarray(q) - pre.joints))) > ON_LINE_JOINTS_RAD
     ):
         return plan

@@ -42,7 +42,7 @@ class LinePace:
         v = tool_speed_profile(
             d, self.approach_m_s, self.touch_m_s, self.band_from_m, self.accel_m_s2, end_at_rest=False
         )
-        return float(np.sum(2 * np.diff(d) / np.maximum(v[:-1] + v[1:], 1e-12)))
+        return float(np.sum(interval_times(d, v)))
 
 
 def tool_speed_profile(
@@ -67,6 +67,12 @@ def tool_speed_profile(
     for k in range(len(v) - 2, -1, -1):  # and slowing down before the band and the end
         v[k] = min(v[k], math.sqrt(v[k + 1] ** 2 + 2 * accel * dd[k]))
     return v
+
+
+def interval_times(distance: Array, speed: Array) -> Array:
+    """How long the tool takes between successive ``distance``s at the ``speed``s there (speed changing
+    evenly between them)."""
+    return 2 * np.diff(distance) / np.maximum(speed[:-1] + speed[1:], 1e-9)
 
 
 def paced_on_line(
@@ -128,8 +134,7 @@ def _paced(
     accel: float,
 ) -> JointTrajectory:
     v = tool_speed_profile(d, approach_m_s, touch_m_s, band_from_m, accel)
-    dt = 2 * np.diff(d) / np.maximum(v[:-1] + v[1:], 1e-9)
-    t = np.concatenate([[0.0], np.cumsum(dt)])
+    t = np.concatenate([[0.0], np.cumsum(interval_times(d, v))])
     dq_dd = np.gradient(q, d, axis=0)
     qd = dq_dd * v[:, None]
     qdd = np.gradient(qd, t, axis=0)

@@ -13,7 +13,12 @@ import mujoco
 import numpy as np
 
 from services.common.errors import InvalidInputError
-from services.common.frames import invert_transform, make_transform, tilt_from_vertical_deg
+from services.common.frames import (
+    invert_transform,
+    make_transform,
+    rotation_angle_rad,
+    tilt_from_vertical_deg,
+)
 from services.common.settings import TwinCameraSettings
 from services.sim.twin.engine import TwinEngine
 from services.sim.twin.mjcf import camera_axes, camera_pose
@@ -156,7 +161,7 @@ def axis_tilt_deg(T_base_object: Array) -> float:
 def slip(T_tool_object_ref: Array, T_tool_object_now: Array) -> tuple[float, float]:
     """Drift of a held object in the tool frame: (mm, deg)."""
     delta = invert_transform(np.asarray(T_tool_object_ref)) @ np.asarray(T_tool_object_now)
-    angle = np.degrees(np.arccos(np.clip((np.trace(delta[:3, :3]) - 1) / 2, -1.0, 1.0)))
+    angle = np.degrees(rotation_angle_rad(np.eye(3), delta[:3, :3]))
     return float(np.linalg.norm(delta[:3, 3]) * 1000.0), float(angle)
 
 
