@@ -189,7 +189,12 @@ async def test_a_twin_cycle_is_live_in_foxglove_and_recorded_and_replays(
     # at ≈ 125 Hz of the controller's clock (a feedback reconnect on a loaded machine may leave a gap)
     js = [common_pb2.JointState.FromString(d) for d in by_topic[Topic.JOINT_STATES]]
     seqs = [m.header.seq for m in js]
-    assert seqs == sorted(seqs) and len(published) > 100 and set(published) <= set(seqs)
+    missing = sorted(set(published) - set(seqs))
+    assert seqs == sorted(seqs) and len(published) > 100 and not missing, (
+        f"joint states published but not recorded: {missing[:10]}; recorded {seqs[0]}..{seqs[-1]}, the "
+        f"recorder took up to {view.last_joint_seq}, counted {view.recorder.files[0].messages} messages, "
+        f"the file holds {len(messages)} ({summary.statistics.message_count} by its statistics)"
+    )
     span = js[-1].source_stamp_ns - js[0].source_stamp_ns
     assert len(js) >= 0.8 * (span / FEEDBACK_PERIOD_NS + 1)
     # the task's plans of the cycle came over the bus (the task service publishes them), with the cycle's index
