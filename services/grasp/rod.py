@@ -5,9 +5,15 @@ component is noise) and its centre on the table (z = table + radius; a larger di
 with the measured height is an error). The plan:
 
 ``SAFE_HOME`` (joint) → ``PRE_GRASP`` (joint, open) → ``GRASP`` (linear, close) → ``LIFT`` (linear)
-→ ``REORIENT`` (linear: the 90° turn about the tool tip, dense IK) → ``PLACE_ABOVE`` (linear) →
-``PLACE`` (guarded linear descent until the wrist feels the touch-down) → ``RELEASE`` (hold, open)
-→ ``RETRACT`` (back out along the approach, clear of the rod) → ``RETRACT_UP`` (linear).
+→ ``REORIENT`` (linear: the 90° turn about the tool tip, dense IK) → ``CARRY`` (linear, over what
+stands on the way) → ``PLACE_ABOVE`` (linear) → ``PLACE`` (guarded linear descent until the wrist feels
+the touch-down) → ``RELEASE`` (hold, open) → ``RETRACT`` (back out along the approach, clear of the
+rod) → ``RETRACT_UP`` (linear).
+
+The carry from the lift to above the place goes as joint moves instead where they pass every check
+its tool lines pass (:mod:`services.grasp.rod_carry`): a tool line ties the joints together, and the
+joints alone get there sooner. The turn then goes through one or two of the tool line's own joints on the way
+(``REORIENT_1_OF_2``), and the upright rod straight to above the place (no ``CARRY``) where it may.
 
 Grasp: top-down, jaws perpendicular to the rod axis at its centre (or ``grasp_offset_m`` along
 it), tool x along the rod. Choices, compared side by side with batched closed-form IK:
@@ -48,6 +54,7 @@ from services.grasp.force_closure import evaluate_force_closure
 from services.grasp.geometry import cylinder_lowest_z, lowest_gripper_z, pose, pose_paths, unit
 from services.grasp.plan import Grasp, Guard, HeldObject, PickPlan, Waypoint
 from services.grasp.reach import check_reach, track_paths
+from services.grasp.rod_carry import CARRY_KEYS, CarryFloors, CarryMove, joint_carry
 from services.grasp.synthesis import CollisionCheck, contact_model, track_limits, width_quality
 from services.grasp.way import carry_height
 from services.kinematics.analytic import fk
@@ -195,7 +202,19 @@ def plan_pick_and_stand(
                 skipped += 1
                 continue
             return _assemble(
-                spec, o, res.q[b], home, cost, lift, rod, cfg, T_flange_tool, stroke_m, p_xy, len(ranked)
+                spec,
+                o,
+                res.q[b],
+                home,
+                cost,
+                lift,
+                rod,
+                cfg,
+                T_flange_tool,
+                stroke_m,
+                p_xy,
+                len(ranked),
+                collision_check,
             )
     # every option's cheapest IK branch collided or was passed over: their other branches, in the
     # same order (the cheapest may take the elbow down to the table where another clears it; seed
@@ -212,7 +231,19 @@ def plan_pick_and_stand(
                 skipped += 1
                 break
             return _assemble(
-                spec, o, q_path, home, cost, lift, rod, cfg, T_flange_tool, stroke_m, p_xy, n_ranked
+                spec,
+                o,
+                q_path,
+                home,
+                cost,
+                lift,
+                rod,
+                cfg,
+                T_flange_tool,
+                stroke_m,
+                p_xy,
+                n_ranked,
+                collision_check,
             )
     if skipped:
         raise PlanningError(
@@ -476,9 +507,30 @@ def _assemble(
     stroke_m: float,
     p_xy: Array,
     n_feasible: int,
+    check: CollisionCheck | None = None,
 ) -> PickPlan:
     rc, g = cfg.rod, cfg.gripper
     ki, P = o.key_index, o.poses
+    # the carry as joint moves where they pass the lines' checks (services.grasp.rod_carry)
+    floors = CarryFloors(cfg.table_z_m + rc.turn_clearance_m, cfg.table_z_m + PLACE_MARGIN_M)
+    carry = (
+        joint_carry(spec, q_path, ki, o.held, floors, cfg, T_flange_tool, check)
+        if rc.joint_carry
+        else dict.fromkeys(CARRY_KEYS[1:], CarryMove("off"))
+    )
+
+    def carried(name: str) -> tuple[Waypoint, ...]:
+        """The waypoint ``name`` of the carry, after the tool line's joints its joint moves go through."""
+        how = carry[name]
+        if how.passed:
+            return ()
+        kind = MotionKind.LINEAR if how.why_line else MotionKind.JOINT
+        via = tuple(
+            Waypoint(f"{name}_{k + 1}_OF_{len(how.via) + 1}", o.path[i], kind, q_path[i].copy(), holding=True)
+            for k, i in enumerate(how.via)
+        )
+        return (*via, Waypoint(name, P[name], kind, q(name), holding=True))
+
     guard = Guard(
         rc.touch_force_drop_n,
         rc.guard_overtravel_m,
@@ -498,9 +550,9 @@ def _assemble(
         ),
         Waypoint("GRASP", P["GRASP"], MotionKind.LINEAR, q("GRASP"), gripper=GripperCommand.CLOSE),
         Waypoint("LIFT", P["LIFT"], MotionKind.LINEAR, q("LIFT"), holding=True),
-        Waypoint("REORIENT", P["REORIENT"], MotionKind.LINEAR, q("REORIENT"), holding=True),
-        Waypoint("CARRY", P["CARRY"], MotionKind.LINEAR, q("CARRY"), holding=True),
-        Waypoint("PLACE_ABOVE", P["PLACE_ABOVE"], MotionKind.LINEAR, q("PLACE_ABOVE"), holding=True),
+        *carried("REORIENT"),
+        *carried("CARRY"),
+        *carried("PLACE_ABOVE"),
         Waypoint("PLACE", P["PLACE"], MotionKind.LINEAR, q("PLACE"), guard=guard, holding=True),
         Waypoint(
             "RELEASE", P["PLACE"], MotionKind.HOLD, q("PLACE"), gripper=GripperCommand.OPEN, holding=True
@@ -539,5 +591,6 @@ def _assemble(
             "tool_x_after_turn": "up" if o.eps > 0 else "down",
             "joint_motion_rad": cost,
             "feasible_options": float(n_feasible),
+            **{f"carry_to_{n.lower()}": how.describe() for n, how in carry.items()},
         },
     )

@@ -55,8 +55,13 @@ async def test_plan_pick_and_stand_returns_the_waypoint_plan(stub) -> None:  # t
         plan = await stub.PlanPickAndStand(req)
     assert plan.task == TaskKind.STAND_ROD
     names = [w.name for w in plan.waypoints]
-    assert names[:5] == ["SAFE_HOME", "PRE_GRASP", "GRASP", "LIFT", "REORIENT"]
+    assert names[:4] == ["SAFE_HOME", "PRE_GRASP", "GRASP", "LIFT"]
+    assert names.index("REORIENT") < names.index("PLACE_ABOVE") < names.index("PLACE")
     by_name = {w.name: w for w in plan.waypoints}
+    # the service checks collisions: the carry goes as joint moves, which the summary says
+    carry = names[names.index("LIFT") + 1 : names.index("PLACE")]
+    assert all(by_name[n].motion == grasp_pb2.PickWaypoint.JOINT for n in carry), carry
+    assert "carry_to_place_above joint moves in 1 part(s)" in plan.summary
     assert by_name["GRASP"].gripper == grasp_pb2.PickWaypoint.CLOSE
     assert by_name["RELEASE"].motion == grasp_pb2.PickWaypoint.HOLD
     assert by_name["PLACE"].HasField("guard") and by_name["PLACE"].guard.force_drop_n == pytest.approx(0.6)

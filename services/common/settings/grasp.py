@@ -90,6 +90,12 @@ class RodStandSettings(Model):
     turn_step_deg: float = Field(
         4.0, gt=0, le=10, description="orientation step of the turn checks (motion executes it densely)"
     )
+    joint_carry: bool = Field(
+        True,
+        description="carry the held rod from the lift to above the place as joint moves through the turn's "
+        "key poses where that path passes every check the straight tool lines pass (they take longer: the "
+        "tool line ties the joints together); false: always the tool lines",
+    )
     inner_turn_radius_m: float = Field(
         0.40,
         gt=0.1,

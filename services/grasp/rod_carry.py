@@ -1,0 +1,126 @@
+"""The stand-up carry as joint moves (pure): from the lift to above the place, the held rod goes by joint
+moves where they pass every check its tool lines pass. A tool line ties the joints together; the joints
+alone get there sooner (seed 1003: the lines took 1.83 s from the grasp to above the place, the joints
+need 1.51 s). The rod planner (:mod:`services.grasp.rod`) tracks the tool lines first; this decides, per
+waypoint of the carry, whether its joint move may replace its line."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from itertools import pairwise
+
+import numpy as np
+
+from services.common.settings import GraspSettings
+from services.grasp.geometry import cylinder_lowest_z, lowest_gripper_z
+from services.grasp.plan import HeldObject
+from services.grasp.reach import origin_heights, singularity_margin
+from services.grasp.synthesis import CollisionCheck, track_limits
+from services.kinematics.analytic import fk
+from services.kinematics.robot_models import RobotSpec
+
+Array = np.ndarray
+
+CARRY_KEYS = ("LIFT", "REORIENT", "CARRY", "PLACE_ABOVE")  # the carry's waypoints, from the lift on
+STEP_RAD = math.radians(1.0)  # the largest joint step between the checked samples of a joint move
+UPRIGHT_COS = math.cos(math.radians(10.0))  # a rod this near upright is let down, not swung, near the table
+MAX_TURN_PARTS = 3  # the turn as joint moves in up to this many parts (through the tool line's joints)
+COLLISION_STRIDE = 2  # check every 2nd sample (and the last)
+
+
+@dataclass(frozen=True)
+class CarryMove:
+    """How the held rod goes to one waypoint of the carry: by joint moves through ``via`` (indices of the
+    tracked path: the tool line's own joints on the way) when ``why_line`` is empty, else along its tool
+    line. ``passed``: the waypoint is left out, the joint move to the next goes on from the one before."""
+
+    why_line: str
+    via: tuple[int, ...] = ()
+    passed: bool = False
+
+    def describe(self) -> str:
+        if self.why_line:
+            return f"tool line: {self.why_line}"
+        return (
+            "passed by (the joint move goes on)"
+            if self.passed
+            else f"joint moves in {len(self.via) + 1} part(s)"
+        )
+
+
+@dataclass(frozen=True)
+class CarryFloors:
+    """Where the held rod's lowest point must stay (base z): above ``turn_m`` while it turns, above
+    ``upright_m`` once upright (it is let down so toward the place)."""
+
+    turn_m: float
+    upright_m: float
+
+
+def joint_carry(
+    spec: RobotSpec,
+    q_path: Array,
+    key_index: dict[str, int],
+    held: HeldObject,
+    floors: CarryFloors,
+    cfg: GraspSettings,
+    T_flange_tool: Array,
+    check: CollisionCheck | None,
+) -> dict[str, CarryMove]:
+    """How the held rod goes to each waypoint of the carry after the lift (REORIENT, CARRY, PLACE_ABOVE),
+    the tool lines tracked as ``q_path`` (``key_index``: where each waypoint is on it).
+
+    The turn goes as one joint move from the lift, else through the tool line's joints at the half or at
+    the thirds of the way (``MAX_TURN_PARTS``), else along its line. The upright rod then goes straight
+    to above the place when it may (CARRY passed), else to CARRY and on, each as a joint move or a line.
+
+    A joint move passes when, sampled at most ``STEP_RAD`` apart, the rod lengthened by the grasp
+    tolerance stays above ``floors``, the fingers above the table, the elbow and wrist off the table and
+    away from singularities, and nothing collides with the rod held. Joints in limits at both ends are in
+    limits between them. Without a collision check the carry keeps to the tool lines (laid over what
+    stands on the way)."""
+    if check is None:
+        return {b: CarryMove("no collision check") for b in CARRY_KEYS[1:]}
+    g, table = cfg.gripper, cfg.table_z_m
+    limits = track_limits(cfg)
+    opening = held.radius * 2 + g.width_margin_m
+    length = held.length + 2 * cfg.rod.offset_tolerance_m
+
+    def why_not(qa: Array, qb: Array, floor: float) -> str:
+        """Why the joint move from ``qa`` to ``qb`` fails a check ("" when it passes); ``floor``: the
+        rod's lowest point while it is tilted."""
+        n = max(1, math.ceil(float(np.max(np.abs(qb - qa))) / STEP_RAD))
+        q = qa + (np.arange(1, n + 1) / n)[:, None] * (qb - qa)
+        T_tool = fk(spec, q, T_flange_tool)
+        T_rod = T_tool @ held.T_tool_object
+        lows = cylinder_lowest_z(T_rod[:, :3, 3], T_rod[:, :3, 2], held.radius, length)
+        short = lows - np.where(np.abs(T_rod[:, 2, 2]) >= UPRIGHT_COS, floors.upright_m, floor)
+        if float(short.min()) < 0.0:
+            low = float(lows[int(np.argmin(short))])
+            return f"the rod end would come within {max(low - table, 0.0) * 1000:.0f} mm of the table"
+        if float(lowest_gripper_z(g, T_tool, opening).min()) < table + g.table_clearance_m - 1e-9:
+            return "the fingers would touch the table"
+        if float(origin_heights(spec, q)[:, 2:].min()) < limits.table_z_m + limits.arm_table_clearance_m:
+            return f"the elbow or wrist would come within {limits.arm_table_clearance_m:.2f} m of the table"
+        if float(singularity_margin(spec, q).min()) < limits.min_singularity_sin:
+            return "it passes near a wrist or elbow singularity"
+        if any(check(q[k], held) for k in [*range(0, n - 1, COLLISION_STRIDE), n - 1]):
+            return "a collision with the rod held"
+        return ""
+
+    lift, turn, carry, above = (key_index[k] for k in CARRY_KEYS)
+    out: dict[str, CarryMove] = {"REORIENT": CarryMove("")}
+    for parts in range(1, MAX_TURN_PARTS + 1):  # the turn, through the tool line's joints on the way
+        knots = [lift + round(k * (turn - lift) / parts) for k in range(parts + 1)]
+        why = next((w for u, v in pairwise(knots) if (w := why_not(q_path[u], q_path[v], floors.turn_m))), "")
+        out["REORIENT"] = CarryMove(why, () if why else tuple(knots[1:-1]))
+        if not why:
+            break
+    # the upright rod from the turn to above the place: straight there in joint space where it may
+    up = floors.upright_m
+    if not why_not(q_path[turn], q_path[above], up):
+        return {**out, "CARRY": CarryMove("", passed=True), "PLACE_ABOVE": CarryMove("")}
+    out["CARRY"] = CarryMove(why_not(q_path[turn], q_path[carry], up))
+    out["PLACE_ABOVE"] = CarryMove(why_not(q_path[carry], q_path[above], up))
+    return out
