@@ -78,5 +78,12 @@ class MotionCollisionCheck:
     def __call__(self, q: Array, held: HeldObject | None = None) -> bool:
         return self._checker(held).in_collision(np.asarray(q, dtype=float))
 
+    def with_boxes(self, extra: Sequence[Box]) -> MotionCollisionCheck:
+        """The same check with ``extra`` boxes in the scene (what the plan itself puts on the table)."""
+        sc = self._scene
+        return MotionCollisionCheck(
+            self.arm, (*sc.boxes, *extra), sc.table_z, sc.padding_m, sc.box_y_extension_m
+        )
+
     def explain(self, q: Array, held: HeldObject | None = None) -> str:
         return self._checker(held).explain(np.asarray(q, dtype=float))

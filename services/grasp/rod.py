@@ -8,12 +8,15 @@ with the measured height is an error). The plan:
 → ``REORIENT`` (linear: the 90° turn about the tool tip, dense IK) → ``CARRY`` (linear, over what
 stands on the way) → ``PLACE_ABOVE`` (linear) → ``PLACE`` (guarded linear descent until the wrist feels
 the touch-down) → ``RELEASE`` (hold, open) → ``RETRACT`` (back out along the approach, clear of the
-rod) → ``RETRACT_UP`` (linear).
+rod) → ``RETRACT_UP`` (linear, above the standing rod).
 
 The carry from the lift to above the place goes as joint moves instead where they pass every check
 its tool lines pass (:mod:`services.grasp.rod_carry`): a tool line ties the joints together, and the
-joints alone get there sooner. The turn then goes through one or two of the tool line's own joints on the way
-(``REORIENT_1_OF_2``), and the upright rod straight to above the place (no ``CARRY``) where it may.
+joints alone get there sooner. The turn then goes through one or two of the tool line's own joints on
+the way (``REORIENT_1_OF_2``), and the upright rod straight to above the place (no ``CARRY``) where it
+may.
+Where the straight joint line from the retract to the safe home passes the standing rod, the rise
+after the retract goes on that line (the way home goes on along it).
 
 Grasp: top-down, jaws perpendicular to the rod axis at its centre (or ``grasp_offset_m`` along
 it), tool x along the rod. Choices, compared side by side with batched closed-form IK:
@@ -54,7 +57,15 @@ from services.grasp.force_closure import evaluate_force_closure
 from services.grasp.geometry import cylinder_lowest_z, lowest_gripper_z, pose, pose_paths, unit
 from services.grasp.plan import Grasp, Guard, HeldObject, PickPlan, Waypoint
 from services.grasp.reach import check_reach, track_paths
-from services.grasp.rod_carry import CARRY_KEYS, CarryFloors, CarryMove, joint_carry
+from services.grasp.rod_carry import (
+    CARRY_KEYS,
+    CarryFloors,
+    CarryMove,
+    home_from_retract,
+    joint_carry,
+    rise_toward_home,
+    standing_rod_box,
+)
 from services.grasp.synthesis import CollisionCheck, contact_model, track_limits, width_quality
 from services.grasp.way import carry_height
 from services.kinematics.analytic import fk
@@ -515,7 +526,7 @@ def _assemble(
     floors = CarryFloors(cfg.table_z_m + rc.turn_clearance_m, cfg.table_z_m + PLACE_MARGIN_M)
     carry = (
         joint_carry(spec, q_path, ki, o.held, floors, cfg, T_flange_tool, check)
-        if rc.joint_carry
+        if rc.joint_moves
         else dict.fromkeys(CARRY_KEYS[1:], CarryMove("off"))
     )
 
@@ -542,6 +553,16 @@ def _assemble(
     def q(name: str) -> Array:
         return q_path[ki[name]].copy()
 
+    # the rise after the retract on the straight joint line home where that line passes the standing rod
+    # (the tool line up above the rod and the move home from there: 0.48 + 1.09 s; seed 1003)
+    standing = standing_rod_box(p_xy, cfg.table_z_m, rod.diameter / 2, rod.length, rc.offset_tolerance_m)
+    why_rise = home_from_retract(q("RETRACT"), home, standing, check) if rc.joint_moves else "off"
+    if why_rise:
+        rise = Waypoint("RETRACT_UP", P["RETRACT_UP"], MotionKind.LINEAR, q("RETRACT_UP"))
+    else:
+        q_up = rise_toward_home(spec, q("RETRACT"), home, float(P["RETRACT_UP"][2, 3]), T_flange_tool)
+        rise = Waypoint("RETRACT_UP", fk(spec, q_up) @ T_flange_tool, MotionKind.JOINT, q_up)
+
     T_home = fk(spec, home) @ T_flange_tool
     wps = (
         Waypoint("SAFE_HOME", T_home, MotionKind.JOINT, home.copy()),
@@ -558,7 +579,7 @@ def _assemble(
             "RELEASE", P["PLACE"], MotionKind.HOLD, q("PLACE"), gripper=GripperCommand.OPEN, holding=True
         ),
         Waypoint("RETRACT", P["RETRACT"], MotionKind.LINEAR, q("RETRACT")),
-        Waypoint("RETRACT_UP", P["RETRACT_UP"], MotionKind.LINEAR, q("RETRACT_UP")),
+        rise,
     )
     eps, closure = _rod_grasp_quality(rod, cfg, P["GRASP"], o.held.T_tool_object)
     wq = width_quality(rod.diameter, stroke_m)
@@ -592,5 +613,6 @@ def _assemble(
             "joint_motion_rad": cost,
             "feasible_options": float(n_feasible),
             **{f"carry_to_{n.lower()}": how.describe() for n, how in carry.items()},
+            "rise_after_retract": f"tool line: {why_rise}" if why_rise else "joint move on the line home",
         },
     )

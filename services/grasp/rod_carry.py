@@ -1,8 +1,9 @@
-"""The stand-up carry as joint moves (pure): from the lift to above the place, the held rod goes by joint
-moves where they pass every check its tool lines pass. A tool line ties the joints together; the joints
-alone get there sooner (seed 1003: the lines took 1.83 s from the grasp to above the place, the joints
-need 1.51 s). The rod planner (:mod:`services.grasp.rod`) tracks the tool lines first; this decides, per
-waypoint of the carry, whether its joint move may replace its line."""
+"""Joint moves that may replace the rod plan's tool lines (pure). A tool line ties the joints together;
+the joints alone get there sooner (seed 1003: the lines took 1.83 s from the grasp to above the place,
+the joints need 1.51 s). The rod planner (:mod:`services.grasp.rod`) tracks the tool lines first; this
+decides, per waypoint of the carry, whether its joint move may replace its line (:func:`joint_carry`),
+and whether the way home may start at the retract, without the rise above the standing rod
+(:func:`home_from_retract`)."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from services.grasp.plan import HeldObject
 from services.grasp.reach import origin_heights, singularity_margin
 from services.grasp.synthesis import CollisionCheck, track_limits
 from services.kinematics.analytic import fk
+from services.kinematics.collision import Box
 from services.kinematics.robot_models import RobotSpec
 
 Array = np.ndarray
@@ -27,6 +29,11 @@ STEP_RAD = math.radians(1.0)  # the largest joint step between the checked sampl
 UPRIGHT_COS = math.cos(math.radians(10.0))  # a rod this near upright is let down, not swung, near the table
 MAX_TURN_PARTS = 3  # the turn as joint moves in up to this many parts (through the tool line's joints)
 COLLISION_STRIDE = 2  # check every 2nd sample (and the last)
+# the standing rod's box is this much wider and taller than the one the task's way home is planned past
+# (services.task.moves.placed_box: the rod's radius, its length + 0.03 m): more than the motion planner's
+# search clearance, so the way home it plans is the straight joint line checked here
+STANDING_MARGIN_M = 0.01
+STANDING_TOP_M = 0.03
 
 
 @dataclass(frozen=True)
@@ -124,3 +131,46 @@ def joint_carry(
     out["CARRY"] = CarryMove(why_not(q_path[turn], q_path[carry], up))
     out["PLACE_ABOVE"] = CarryMove(why_not(q_path[carry], q_path[above], up))
     return out
+
+
+def standing_rod_box(
+    place_xy: Array, table_z: float, radius: float, length: float, offset_tolerance_m: float
+) -> Box:
+    """The rod stood at ``place_xy``: from the table to its top held ``offset_tolerance_m`` high, taller
+    by what the collision model leaves out at the open jaw's tips, ``STANDING_MARGIN_M`` all round."""
+    r = radius + STANDING_MARGIN_M
+    top = table_z + length + offset_tolerance_m + STANDING_TOP_M + STANDING_MARGIN_M
+    return Box(
+        (place_xy[0] - r, place_xy[1] - r, table_z), (place_xy[0] + r, place_xy[1] + r, top), "standing rod"
+    )
+
+
+def home_from_retract(q_retract: Array, q_home: Array, standing: Box, check: CollisionCheck | None) -> str:
+    """Why the arm may not go home in one joint move from the retract, past the rod it stood ("" when it
+    may): the straight joint line from ``q_retract`` to the safe home ``q_home`` (the task parks on it,
+    short of home where the camera's view is clear) sampled every ``STEP_RAD``, checked with the rod's
+    box ``standing`` added to the scene. Otherwise the arm first rises above the rod (RETRACT_UP), as
+    the plan had it. A check that cannot take the box added answers for the rise."""
+    with_boxes = getattr(check, "with_boxes", None)
+    if not callable(with_boxes):
+        return "no collision check with the standing rod"
+    with_rod = with_boxes([standing])
+    n = max(1, math.ceil(float(np.max(np.abs(q_home - q_retract))) / STEP_RAD))
+    for k in range(1, n + 1):
+        q = q_retract + (k / n) * (q_home - q_retract)
+        if with_rod(q, None):
+            explain = getattr(with_rod, "explain", None)
+            return f"the way home from the retract meets {explain(q) if callable(explain) else 'an obstacle'}"
+    return ""
+
+
+def rise_toward_home(
+    spec: RobotSpec, q_retract: Array, q_home: Array, height_m: float, T_flange_tool: Array
+) -> Array:
+    """Where the rise after the retract ends when it goes on the straight joint line home: the first pose
+    on it (every ``STEP_RAD``) with the tool tip ``height_m`` high, home itself if none is. The way home
+    the task plans from there goes on along the same line."""
+    n = max(1, math.ceil(float(np.max(np.abs(q_home - q_retract))) / STEP_RAD))
+    q = q_retract + (np.arange(1, n + 1) / n)[:, None] * (q_home - q_retract)
+    high = np.nonzero(fk(spec, q, T_flange_tool)[:, 2, 3] >= height_m)[0]
+    return q[int(high[0])].copy() if high.size else q_home.copy()

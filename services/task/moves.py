@@ -25,8 +25,10 @@ def move_to(plan: GraspPlan, i: int, further_m: float = 0.0) -> Move | None:
     if w.motion is MotionKind.HOLD:
         return None
     if w.motion is MotionKind.JOINT:
-        # the way home passes what was placed: standing there now, it is an obstacle
-        placed = (placed_box(plan),) if w.name == WAY_HOME else ()
+        # the way home, and any joint move after the release, passes what was placed: standing there
+        # now, it is an obstacle
+        released = not w.holding and any(p.holding for p in plan.waypoints[:i])
+        placed = (placed_box(plan),) if w.name == WAY_HOME or released else ()
         return Move(MotionKind.JOINT, w.joints, held, label=w.name, obstacles=placed)
     guarded = w.guard_force_n > 0
     T = w.T_base_tool.copy()

@@ -99,7 +99,7 @@ def test_a_turn_through_the_tool_lines_joints_passes_them_where_the_line_does(ch
 
 def test_without_collision_checks_or_when_turned_off_the_carry_keeps_to_the_tool_lines() -> None:
     rod = random_rods(1, seed=11)[0]
-    off = CFG.model_copy(update={"rod": CFG.rod.model_copy(update={"joint_carry": False})})
+    off = CFG.model_copy(update={"rod": CFG.rod.model_copy(update={"joint_moves": False})})
     for p, why in (
         (plan(rod), "no collision check"),
         (plan(rod, off, collision_check=obstacle_check()), "off"),
@@ -133,3 +133,43 @@ def test_a_joint_move_that_fails_a_check_leaves_the_tool_line_with_the_reason(ch
     assert {n: m.why_line for n, m in blocked.items()} == dict.fromkeys(
         CARRY_KEYS[1:], "a collision with the rod held"
     )
+
+
+def standing_box(p: PickPlan, rod: object) -> Box:
+    """The stood rod as the task's way home is planned past it (services.task.moves.placed_box): the
+    rod's radius round the place, its length + 0.03 m high, with the rod held 30 mm off its centre."""
+    x, y = p.place_position[:2]
+    r = p.held.radius
+    return Box((x - r, y - r, 0.0), (x + r, y + r, p.held.length + CFG.rod.offset_tolerance_m + 0.03), "rod")
+
+
+def test_the_rise_after_the_retract_goes_on_the_joint_line_home_only_where_it_passes_the_standing_rod(  # type: ignore[no-untyped-def]
+    checked,
+) -> None:
+    home = np.radians(CFG.safe_home_joints_deg["nova5"])
+    kinds = {p.notes["rise_after_retract"].split(":")[0] for _r, p, _c in checked}
+    assert kinds == {"joint move on the line home", "tool line"}, kinds  # both kinds in this set
+    for rod, p, check in checked:
+        up, back = p.waypoint("RETRACT_UP"), p.waypoint("RETRACT")
+        assert np.allclose(fk(SPEC, up.q) @ T_FLANGE_TOOL, up.T_base_tool, atol=1e-6)
+        if up.motion is MotionKind.LINEAR:  # straight up above the rod first, as before
+            assert p.notes["rise_after_retract"].startswith("tool line: the way home from the retract meets")
+            assert np.allclose(up.T_base_tool[:2, 3], back.T_base_tool[:2, 3], atol=1e-9)
+            continue
+        # on the straight joint line from the retract to the safe home, the tool as high as the line rose
+        # above the rod (or home itself) ...
+        d = (up.q - back.q) / (home - back.q)
+        assert np.allclose(d, d[0], atol=1e-9) and 0.0 < d[0] <= 1.0
+        top = rod.length + CFG.rod.retract_clear_m  # type: ignore[attr-defined]
+        assert up.T_base_tool[2, 3] >= CFG.table_z_m + top - 1e-9 or d[0] == pytest.approx(1.0)
+        # ... and the whole line home passes the standing rod, checked here with its box in the scene
+        with_rod = check.with_boxes([standing_box(p, rod)])
+        for s in np.linspace(0.0, 1.0, SAMPLES):
+            q = back.q + s * (home - back.q)
+            assert not with_rod(q, None), f"{s:.2f} of the way home: {with_rod.explain(q)}"
+
+
+def test_without_collision_checks_the_rise_after_the_retract_stays_the_line_up() -> None:
+    p = plan(random_rods(1, seed=11)[0])
+    assert p.waypoint("RETRACT_UP").motion is MotionKind.LINEAR
+    assert p.notes["rise_after_retract"] == "tool line: no collision check with the standing rod"

@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from services.task.ports import SeenBox
+from services.common.modes import GripperCommand, MotionKind, TaskKind
+from services.task.moves import WAY_HOME, move_to, placed_box
+from services.task.ports import GraspPlan, PlannedWaypoint, SeenBox
 from tests.task.fakes import HOME, FakeCell, FakeView, FakeVision, joints_at, rod_at, seen
 
 
@@ -104,3 +106,34 @@ async def test_the_arm_never_parks_inside_a_box_it_saw_so_the_next_picture_keeps
     # and the next cycle plans with the wall still in it
     await cell.run()
     assert any(np.allclose(b.min, wall.min) for b in cell.motion.requests[-1].obstacles)
+
+
+def test_every_joint_move_after_the_release_passes_the_placed_object_as_an_obstacle() -> None:
+    """The rise after a rod's retract may go on the joint line home (services.grasp.rod_carry): like the
+    way home, it is planned with the stood rod in its scene; a joint move carrying the rod is not."""
+    T = np.eye(4)
+
+    def wp(name: str, motion: MotionKind, holding: bool = False, gripper: GripperCommand | None = None):  # type: ignore[no-untyped-def]
+        return PlannedWaypoint(name, motion, T, np.zeros(6), gripper=gripper, holding=holding)
+
+    plan = GraspPlan(
+        TaskKind.STAND_ROD,
+        [
+            wp("GRASP", MotionKind.LINEAR, gripper=GripperCommand.CLOSE),
+            wp("REORIENT", MotionKind.JOINT, holding=True),
+            wp("PLACE_ABOVE", MotionKind.JOINT, holding=True),
+            wp("RELEASE", MotionKind.HOLD, holding=True, gripper=GripperCommand.OPEN),
+            wp("RETRACT", MotionKind.LINEAR),
+            wp("RETRACT_UP", MotionKind.JOINT),
+            wp(WAY_HOME, MotionKind.JOINT),
+        ],
+        0.9,
+        None,
+        np.array([0.45, 0.0, 0.0]),
+    )
+    placed = placed_box(plan)
+    obstacles = {w.name: move_to(plan, i).obstacles for i, w in enumerate(plan.waypoints) if move_to(plan, i)}  # type: ignore[union-attr]
+    assert obstacles["REORIENT"] == obstacles["PLACE_ABOVE"] == ()
+    for name in ("RETRACT_UP", WAY_HOME):
+        (box,) = obstacles[name]
+        assert np.array_equal(box.min, placed.min) and np.array_equal(box.max, placed.max)

@@ -90,11 +90,11 @@ class RodStandSettings(Model):
     turn_step_deg: float = Field(
         4.0, gt=0, le=10, description="orientation step of the turn checks (motion executes it densely)"
     )
-    joint_carry: bool = Field(
+    joint_moves: bool = Field(
         True,
-        description="carry the held rod from the lift to above the place as joint moves through the turn's "
-        "key poses where that path passes every check the straight tool lines pass (they take longer: the "
-        "tool line ties the joints together); false: always the tool lines",
+        description="joint moves instead of the tool lines where they pass every check the lines pass (a "
+        "tool line ties the joints together and takes longer): the held rod from the lift to above the "
+        "place, and the rise after the retract on the straight joint line home; false: always the lines",
     )
     inner_turn_radius_m: float = Field(
         0.40,
