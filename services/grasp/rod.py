@@ -183,6 +183,24 @@ def plan_pick_and_stand(
     lift = max(rc.min_lift_m, tip_height - tcp_z)
 
     T_tool_flange = invert_transform(T_flange_tool)
+
+    def assemble(o: _Option, q_path: Array, cost: float, n_feasible: int) -> PickPlan:
+        return _assemble(
+            spec,
+            o,
+            q_path,
+            home,
+            cost,
+            lift,
+            rod,
+            cfg,
+            T_flange_tool,
+            stroke_m,
+            p_xy,
+            n_feasible,
+            collision_check,
+        )
+
     tried: list[_Option] = []
     skipped = 0
     colliding: list[tuple[_Option, list[tuple[float, Array]], int]] = []  # other branches, site's feasible
@@ -212,21 +230,7 @@ def plan_pick_and_stand(
             if skipped < alternative:
                 skipped += 1
                 continue
-            return _assemble(
-                spec,
-                o,
-                res.q[b],
-                home,
-                cost,
-                lift,
-                rod,
-                cfg,
-                T_flange_tool,
-                stroke_m,
-                p_xy,
-                len(ranked),
-                collision_check,
-            )
+            return assemble(o, res.q[b], cost, len(ranked))
     # every option's cheapest IK branch collided or was passed over: their other branches, in the
     # same order (the cheapest may take the elbow down to the table where another clears it; seed
     # 1912 saw an axis 0.4° off the one that planned leave all 144 options colliding). Only when asked:
@@ -241,21 +245,7 @@ def plan_pick_and_stand(
             if skipped < alternative:
                 skipped += 1
                 break
-            return _assemble(
-                spec,
-                o,
-                q_path,
-                home,
-                cost,
-                lift,
-                rod,
-                cfg,
-                T_flange_tool,
-                stroke_m,
-                p_xy,
-                n_ranked,
-                collision_check,
-            )
+            return assemble(o, q_path, cost, n_ranked)
     if skipped:
         raise PlanningError(
             f"alternative {alternative} requested but the rod has only {skipped} feasible wrist option(s)"
