@@ -59,6 +59,7 @@ from services.grasp.plan import Grasp, Guard, HeldObject, PickPlan, Waypoint
 from services.grasp.reach import check_reach, track_paths
 from services.grasp.rod_carry import (
     CARRY_KEYS,
+    COLLISION_STRIDE,
     CarryFloors,
     CarryMove,
     home_from_retract,
@@ -76,7 +77,6 @@ Array = np.ndarray
 
 DOWN = np.array([0.0, 0.0, -1.0])
 UP = np.array([0.0, 0.0, 1.0])
-COLLISION_STRIDE = 2  # check every 2nd dense sample (and every key pose)
 PLACE_MARGIN_M = 0.005  # worst-case rod end above the table where the guarded descent starts
 MAX_TURN_DEG = 170.0  # REORIENT turns are 90–180°; near 180° the interpolation could go either way
 

@@ -2,8 +2,8 @@
 the joints alone get there sooner (seed 1003: the lines took 1.83 s from the grasp to above the place,
 the joints need 1.51 s). The rod planner (:mod:`services.grasp.rod`) tracks the tool lines first; this
 decides, per waypoint of the carry, whether its joint move may replace its line (:func:`joint_carry`),
-and whether the way home may start at the retract, without the rise above the standing rod
-(:func:`home_from_retract`)."""
+and whether the rise after the retract may go on the straight joint line home instead of straight up
+above the standing rod (:func:`home_from_retract`, :func:`rise_toward_home`)."""
 
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ CARRY_KEYS = ("LIFT", "REORIENT", "CARRY", "PLACE_ABOVE")  # the carry's waypoin
 STEP_RAD = math.radians(1.0)  # the largest joint step between the checked samples of a joint move
 UPRIGHT_COS = math.cos(math.radians(10.0))  # a rod this near upright is let down, not swung, near the table
 MAX_TURN_PARTS = 3  # the turn as joint moves in up to this many parts (through the tool line's joints)
-COLLISION_STRIDE = 2  # check every 2nd sample (and the last)
+COLLISION_STRIDE = 2  # collisions checked at every 2nd dense sample (and the key poses / the last)
 # the standing rod's box is this much wider and taller than the one the task's way home is planned past
 # (services.task.moves.placed_box: the rod's radius, its length + 0.03 m): more than the motion planner's
 # search clearance, so the way home it plans is the straight joint line checked here
