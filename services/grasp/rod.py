@@ -14,8 +14,7 @@ The carry from the lift to above the place goes as joint moves instead where the
 its tool lines pass (:mod:`services.grasp.rod_carry`): a tool line ties the joints together, and the
 joints alone get there sooner. The turn then goes through one or two of the tool line's own joints on
 the way (``REORIENT_1_OF_2``), and the upright rod straight to above the place (no ``CARRY``) where it
-may.
-Where the straight joint line from the retract to the safe home passes the standing rod, the rise
+may. Where the straight joint line from the retract to the safe home passes the standing rod, the rise
 after the retract goes on that line (the way home goes on along it).
 
 Grasp: top-down, jaws perpendicular to the rod axis at its centre (or ``grasp_offset_m`` along
@@ -512,6 +511,10 @@ def _assemble(
 ) -> PickPlan:
     rc, g = cfg.rod, cfg.gripper
     ki, P = o.key_index, o.poses
+
+    def q(name: str) -> Array:
+        return q_path[ki[name]].copy()
+
     # the carry as joint moves where they pass the lines' checks (services.grasp.rod_carry)
     floors = CarryFloors(cfg.table_z_m + rc.turn_clearance_m, cfg.table_z_m + PLACE_MARGIN_M)
     carry = (
@@ -539,9 +542,6 @@ def _assemble(
         slow_band_m=rc.guard_slow_band_m,
         approach_speed_m_s=rc.guard_approach_speed_m_s,
     )
-
-    def q(name: str) -> Array:
-        return q_path[ki[name]].copy()
 
     # the rise after the retract on the straight joint line home where that line passes the standing rod
     # (the tool line up above the rod and the move home from there: 0.48 + 1.09 s; seed 1003)

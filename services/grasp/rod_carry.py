@@ -20,6 +20,7 @@ from services.grasp.reach import origin_heights, singularity_margin
 from services.grasp.synthesis import CollisionCheck, track_limits
 from services.kinematics.analytic import fk
 from services.kinematics.collision import Box
+from services.kinematics.interpolation import densify
 from services.kinematics.robot_models import RobotSpec
 
 Array = np.ndarray
@@ -34,6 +35,11 @@ COLLISION_STRIDE = 2  # collisions checked at every 2nd dense sample (and the ke
 # search clearance, so the way home it plans is the straight joint line checked here
 STANDING_MARGIN_M = 0.01
 STANDING_TOP_M = 0.03
+
+
+def joint_line(qa: Array, qb: Array) -> Array:
+    """The straight joint line from ``qa`` (left out) to ``qb``, sampled at most ``STEP_RAD`` apart."""
+    return densify(np.stack([qa, qb]), STEP_RAD)[1:]
 
 
 @dataclass(frozen=True)
@@ -97,8 +103,8 @@ def joint_carry(
     def why_not(qa: Array, qb: Array, floor: float) -> str:
         """Why the joint move from ``qa`` to ``qb`` fails a check ("" when it passes); ``floor``: the
         rod's lowest point while it is tilted."""
-        n = max(1, math.ceil(float(np.max(np.abs(qb - qa))) / STEP_RAD))
-        q = qa + (np.arange(1, n + 1) / n)[:, None] * (qb - qa)
+        q = joint_line(qa, qb)
+        n = len(q)
         T_tool = fk(spec, q, T_flange_tool)
         T_rod = T_tool @ held.T_tool_object
         lows = cylinder_lowest_z(T_rod[:, :3, 3], T_rod[:, :3, 2], held.radius, length)
@@ -148,16 +154,14 @@ def standing_rod_box(
 def home_from_retract(q_retract: Array, q_home: Array, standing: Box, check: CollisionCheck | None) -> str:
     """Why the arm may not go home in one joint move from the retract, past the rod it stood ("" when it
     may): the straight joint line from ``q_retract`` to the safe home ``q_home`` (the task parks on it,
-    short of home where the camera's view is clear) sampled every ``STEP_RAD``, checked with the rod's
+    short of home where the camera's view is clear) sampled by :func:`joint_line`, checked with the rod's
     box ``standing`` added to the scene. Otherwise the arm first rises above the rod (RETRACT_UP), as
     the plan had it. A check that cannot take the box added answers for the rise."""
     with_boxes = getattr(check, "with_boxes", None)
     if not callable(with_boxes):
         return "no collision check with the standing rod"
     with_rod = with_boxes([standing])
-    n = max(1, math.ceil(float(np.max(np.abs(q_home - q_retract))) / STEP_RAD))
-    for k in range(1, n + 1):
-        q = q_retract + (k / n) * (q_home - q_retract)
+    for q in joint_line(q_retract, q_home):
         if with_rod(q, None):
             explain = getattr(with_rod, "explain", None)
             return f"the way home from the retract meets {explain(q) if callable(explain) else 'an obstacle'}"
@@ -168,9 +172,8 @@ def rise_toward_home(
     spec: RobotSpec, q_retract: Array, q_home: Array, height_m: float, T_flange_tool: Array
 ) -> Array:
     """Where the rise after the retract ends when it goes on the straight joint line home: the first pose
-    on it (every ``STEP_RAD``) with the tool tip ``height_m`` high, home itself if none is. The way home
+    on it (:func:`joint_line`) with the tool tip ``height_m`` high, home itself if none is. The way home
     the task plans from there goes on along the same line."""
-    n = max(1, math.ceil(float(np.max(np.abs(q_home - q_retract))) / STEP_RAD))
-    q = q_retract + (np.arange(1, n + 1) / n)[:, None] * (q_home - q_retract)
+    q = joint_line(q_retract, q_home)
     high = np.nonzero(fk(spec, q, T_flange_tool)[:, 2, 3] >= height_m)[0]
     return q[int(high[0])].copy() if high.size else q_home.copy()
