@@ -87,8 +87,9 @@ class GraspFailureError(ExecutionError):
 
 class PathDeviationError(ExecutionError):
     """The execution monitor stopped the arm: it left its planned path (or the controller's reference) by
-    more than the path tolerance, as when something pushes on it. At a grasp approach: the fingers on the
-    object's edge or on a neighbour, and another grasp is planned."""
+    more than the path tolerance, or settled off the path's end by more than the goal tolerance, as when
+    something pushes on it. At a grasp approach: the fingers on the object's edge or on a neighbour, and
+    another grasp is planned."""
 
 
 class RobotBusyError(ExecutionError):

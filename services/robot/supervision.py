@@ -16,7 +16,7 @@ from typing import TypeVar
 
 import numpy as np
 
-from services.common.errors import ExecutionError
+from services.common.errors import ExecutionError, PathDeviationError
 from services.common.settings import Settings
 from services.robot.feedback import FeedbackState
 from services.robot.link import ControllerLink
@@ -117,7 +117,8 @@ class Supervision:
 
     async def _check_goal(self, goal: np.ndarray, what: str) -> FeedbackState:
         """The goal check: the measured joints within the goal tolerance of ``goal`` within
-        ``goal_settle_s`` of controller time; else the arm is stopped and ExecutionError raised."""
+        ``goal_settle_s`` of controller time; else the arm is stopped and PathDeviationError raised
+        (held off the path's end, as by fingers pressing on the object's edge at a grasp)."""
         r = self.settings.robot
         tol = r.goal_tolerance_rad
         try:
@@ -128,7 +129,7 @@ class Supervision:
             fb = self.feedback
             dev = goal_deviation(fb.q, goal)
             self.monitor_trips += 1
-            self.last_fault = ExecutionError(
+            self.last_fault = PathDeviationError(
                 f"execution monitor: {what} ended with {dev.describe()} its goal after "
                 f"{r.goal_settle_s:.2f} s (goal tolerance {np.rad2deg(tol):.2f}°); arm stopped"
             )

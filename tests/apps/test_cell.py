@@ -116,20 +116,23 @@ async def test_slipping_grasp_is_detected_and_regrasped(tmp_path, caplog):
         first_grasp = states.index(CycleState.GRASP)
         assert CycleState.DETECT in states[first_grasp:]
         # where the dropped rod comes to rest varies from run to run: it is grasped again (and slips
-        # again), or the second plan is refused; either way the cycle stops with that error
-        if states.count(CycleState.GRASP) == 2:
-            assert outcome.error_code == "GraspFailureError"
-        else:
-            assert states.count(CycleState.GRASP) == 1 and outcome.error_code in (
-                "CollisionError",
-                "IKFailureError",
-            )
+        # again), the fingers meet it off where it was seen (the monitor stops them short of the grasp:
+        # another grasp option), or a later plan is refused; the cycle stops with that error
+        assert outcome.error_code in (
+            "GraspFailureError",
+            "PathDeviationError",
+            "CollisionError",
+            "IKFailureError",
+        ), (outcome.error_code, outcome.failure_reason)
+        if outcome.error_code == "GraspFailureError":
+            assert states.count(CycleState.GRASP) >= 2  # one regrasp allowed: the second slip ends it
         # never carried on to the place with an empty gripper: the check after LIFT reads the sensor as
         # the arm passes the lift's end, while the turn is handed over (the cycle is in REORIENT when it
         # answers); a rod that slips out after it (hanging between the fingers until the turn) is
         # caught before the touch-down
         assert CycleState.RELEASE not in states
-        if CycleState.REORIENT in states:
+        last_grasp = len(states) - 1 - states[::-1].index(CycleState.GRASP)
+        if CycleState.REORIENT in states[last_grasp:]:
             assert outcome.error_code == "GraspFailureError"
             assert any(
                 "as the arm passed the lift's end" in r.getMessage()
