@@ -24,18 +24,27 @@ def move_to(plan: GraspPlan, i: int, further_m: float = 0.0) -> Move | None:
     held = plan.held_object if w.holding else None
     if w.motion is MotionKind.HOLD:
         return None
+    # what was placed stands there now: an obstacle to the way home and to every move after the release
+    # but the line out of the jaws around it (a joint move after a release goes elsewhere)
+    released = not w.holding and any(p.holding for p in plan.waypoints[:i])
+    past = w.motion is MotionKind.JOINT or (i > 0 and not plan.waypoints[i - 1].holding)
+    placed = (placed_box(plan),) if w.name == WAY_HOME or (released and past) else ()
     if w.motion is MotionKind.JOINT:
-        # the way home, and any joint move after the release, passes what was placed: standing there
-        # now, it is an obstacle
-        released = not w.holding and any(p.holding for p in plan.waypoints[:i])
-        placed = (placed_box(plan),) if w.name == WAY_HOME or released else ()
         return Move(MotionKind.JOINT, w.joints, held, label=w.name, obstacles=placed)
     guarded = w.guard_force_n > 0
     T = w.T_base_tool.copy()
     if guarded:  # a guarded approach may go as far as the overtravel; touch-down stops it earlier
         T[:3, 3] += (w.guard_overtravel_m + further_m) * w.guard_direction
     lifting_off = w.holding and i > 0 and not plan.waypoints[i - 1].holding
-    return Move(MotionKind.LINEAR, T, held, slow=guarded, table_contact=lifting_off or guarded, label=w.name)
+    return Move(
+        MotionKind.LINEAR,
+        T,
+        held,
+        slow=guarded,
+        table_contact=lifting_off or guarded,
+        label=w.name,
+        obstacles=placed,
+    )
 
 
 def blends(plan: GraspPlan, i: int) -> bool:
@@ -55,13 +64,16 @@ def blends(plan: GraspPlan, i: int) -> bool:
 
 def rounds(plan: GraspPlan, i: int) -> bool:
     """Whether the corner at waypoint ``i`` may be rounded: where the arm flows through it, except
-    beside a release (the move after it starts with the placed object between the open jaws, and that
-    object is in no scene before the way home)."""
-
-    def after_release(j: int) -> bool:
-        return 0 < j < len(plan.waypoints) and plan.waypoints[j - 1].holding and not plan.waypoints[j].holding
-
-    return blends(plan, i) and not after_release(i) and not after_release(i + 1)
+    at the end of the move out of a release when the next move is not checked against the placed object
+    (the curve leaves the line out of the jaws, whose own scene has not got it: :func:`move_to`)."""
+    n = len(plan.waypoints)
+    if not blends(plan, i):
+        return False
+    out_of_release = 0 < i < n and plan.waypoints[i - 1].holding and not plan.waypoints[i].holding
+    if not out_of_release:
+        return True
+    nxt = move_to(plan, i + 1) if i + 1 < n else None
+    return nxt is not None and bool(nxt.obstacles)
 
 
 # a motion from rest that flows on but lasts less than this goes out in one call with the next: the driver

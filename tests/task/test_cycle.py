@@ -110,10 +110,12 @@ async def test_the_arm_stops_only_where_physics_asks() -> None:
     assert {n for n, m in by.items() if m.blend} == {"SAFE_HOME", "PRE_GRASP", "LIFT"}
     assert [m.blend for m in cell.motion.requests[2].moves] == [True, False]  # RETRACT flows home
     assert cell.robot.continued == ["PRE_GRASP", "LIFT", "RETRACT"]
-    # the corners flowed through may be rounded, but not beside the release: RETRACT starts with the
-    # rod between the open jaws, and the rod is in no scene before the way home
+    # the corners flowed through may be rounded; RETRACT's too, as the way home after it has the stood
+    # rod in its scene (RETRACT itself starts with the rod between the open jaws and has not)
     rounded = {m.label: m.blend_tolerance_m for r in cell.motion.requests for m in r.moves}
-    assert {n for n, tol in rounded.items() if tol > 0} == {"SAFE_HOME", "PRE_GRASP", "LIFT"}
+    assert {n for n, tol in rounded.items() if tol > 0} == {"SAFE_HOME", "PRE_GRASP", "LIFT", "RETRACT"}
+    retract, home = cell.motion.requests[2].moves
+    assert retract.obstacles == () and len(home.obstacles) == 1
     assert {tol for tol in rounded.values() if tol > 0} == {cell.config.corner_tolerance_m}
     assert cell.robot.commands[:5] == [
         ("recover",),

@@ -4,9 +4,10 @@ and the next cycle sets off from there; what vision saw of the arm itself is no 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from services.common.modes import GripperCommand, MotionKind, TaskKind
-from services.task.moves import WAY_HOME, move_to, placed_box
+from services.task.moves import WAY_HOME, move_to, placed_box, rounds
 from services.task.ports import GraspPlan, PlannedWaypoint, SeenBox
 from tests.task.fakes import HOME, FakeCell, FakeView, FakeVision, joints_at, rod_at, seen
 
@@ -108,9 +109,12 @@ async def test_the_arm_never_parks_inside_a_box_it_saw_so_the_next_picture_keeps
     assert any(np.allclose(b.min, wall.min) for b in cell.motion.requests[-1].obstacles)
 
 
-def test_every_joint_move_after_the_release_passes_the_placed_object_as_an_obstacle() -> None:
-    """The rise after a rod's retract may go on the joint line home (services.grasp.rod_carry): like the
-    way home, it is planned with the stood rod in its scene; a joint move carrying the rod is not."""
+@pytest.mark.parametrize("rise", [MotionKind.JOINT, MotionKind.LINEAR])
+def test_every_move_after_the_release_passes_the_placed_object_as_an_obstacle(rise: MotionKind) -> None:
+    """The rise after a rod's retract may go on the joint line home (services.grasp.rod_carry) or as a
+    line up: like the way home, it is planned with the stood rod in its scene, so the corner at the
+    retract's end may be rounded; the retract out of the jaws around the rod and a joint move carrying
+    it are not."""
     T = np.eye(4)
 
     def wp(name: str, motion: MotionKind, holding: bool = False, gripper: GripperCommand | None = None):  # type: ignore[no-untyped-def]
@@ -124,7 +128,7 @@ def test_every_joint_move_after_the_release_passes_the_placed_object_as_an_obsta
             wp("PLACE_ABOVE", MotionKind.JOINT, holding=True),
             wp("RELEASE", MotionKind.HOLD, holding=True, gripper=GripperCommand.OPEN),
             wp("RETRACT", MotionKind.LINEAR),
-            wp("RETRACT_UP", MotionKind.JOINT),
+            wp("RETRACT_UP", rise),
             wp(WAY_HOME, MotionKind.JOINT),
         ],
         0.9,
@@ -133,7 +137,9 @@ def test_every_joint_move_after_the_release_passes_the_placed_object_as_an_obsta
     )
     placed = placed_box(plan)
     obstacles = {w.name: move_to(plan, i).obstacles for i, w in enumerate(plan.waypoints) if move_to(plan, i)}  # type: ignore[union-attr]
-    assert obstacles["REORIENT"] == obstacles["PLACE_ABOVE"] == ()
+    assert obstacles["REORIENT"] == obstacles["PLACE_ABOVE"] == obstacles["RETRACT"] == ()
+    names = [w.name for w in plan.waypoints]
+    assert rounds(plan, names.index("RETRACT")) and not rounds(plan, names.index("RELEASE"))
     for name in ("RETRACT_UP", WAY_HOME):
         (box,) = obstacles[name]
         assert np.array_equal(box.min, placed.min) and np.array_equal(box.max, placed.max)

@@ -35,8 +35,9 @@ class TaskSettings(Model):
     holding_speed_scale: float = Field(1.0, gt=0, le=1)
     # Where the arm flows through a waypoint, the motion planner may round the corner so the arm need not
     # slow down for it, the tool leaving the planned path by at most this much; the rounded corner is
-    # collision-checked (motion.padding_m from the table and the boxes) in both moves' scenes. Not
-    # after a release, where the placed object stands beside the open jaws in no move's scene.
+    # collision-checked (motion.padding_m from the table and the boxes) in both moves' scenes; the
+    # corner at the end of the line out of a release is checked against the placed object in the next
+    # move's scene (the line itself starts with it between the open jaws and has not got it).
     corner_tolerance_m: float = Field(
         0.01, ge=0, le=0.1, description="how far a blended corner may leave the planned path (0: not rounded)"
     )
