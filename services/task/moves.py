@@ -25,10 +25,10 @@ def move_to(plan: GraspPlan, i: int, further_m: float = 0.0) -> Move | None:
     if w.motion is MotionKind.HOLD:
         return None
     # what was placed stands there now: an obstacle to the way home and to every move after the release
-    # but the line out of the jaws around it (a joint move after a release goes elsewhere)
+    # but a line straight out of it (that one starts with the object between the open jaws)
     released = not w.holding and any(p.holding for p in plan.waypoints[:i])
-    past = w.motion is MotionKind.JOINT or (i > 0 and not plan.waypoints[i - 1].holding)
-    placed = (placed_box(plan),) if w.name == WAY_HOME or (released and past) else ()
+    out_of_jaws = w.motion is MotionKind.LINEAR and i > 0 and plan.waypoints[i - 1].holding
+    placed = (placed_box(plan),) if w.name == WAY_HOME or (released and not out_of_jaws) else ()
     if w.motion is MotionKind.JOINT:
         return Move(MotionKind.JOINT, w.joints, held, label=w.name, obstacles=placed)
     guarded = w.guard_force_n > 0
