@@ -22,6 +22,7 @@ from services.kinematics.analytic import fk
 from services.kinematics.collision import Box
 from services.kinematics.interpolation import densify
 from services.kinematics.robot_models import RobotSpec
+from services.kinematics.tool import PLACED_TOP_CLEARANCE_M
 
 Array = np.ndarray
 
@@ -31,10 +32,9 @@ UPRIGHT_COS = math.cos(math.radians(10.0))  # a rod this near upright is let dow
 MAX_TURN_PARTS = 3  # the turn as joint moves in up to this many parts (through the tool line's joints)
 COLLISION_STRIDE = 2  # collisions checked at every 2nd dense sample (and the key poses / the last)
 # the standing rod's box is this much wider and taller than the one the task's way home is planned past
-# (services.task.moves.placed_box: the rod's radius, its length + 0.03 m): more than the motion planner's
-# search clearance, so the way home it plans is the straight joint line checked here
+# (services.task.moves.placed_box: the rod's radius, its length + PLACED_TOP_CLEARANCE_M): more than the
+# motion planner's search clearance, so the way home it plans is the straight joint line checked here
 STANDING_MARGIN_M = 0.01
-STANDING_TOP_M = 0.03
 
 
 def joint_line(qa: Array, qb: Array) -> Array:
@@ -145,7 +145,7 @@ def standing_rod_box(
     """The rod stood at ``place_xy``: from the table to its top held ``offset_tolerance_m`` high, taller
     by what the collision model leaves out at the open jaw's tips, ``STANDING_MARGIN_M`` all round."""
     r = radius + STANDING_MARGIN_M
-    top = table_z + length + offset_tolerance_m + STANDING_TOP_M + STANDING_MARGIN_M
+    top = table_z + length + offset_tolerance_m + PLACED_TOP_CLEARANCE_M + STANDING_MARGIN_M
     return Box(
         (place_xy[0] - r, place_xy[1] - r, table_z), (place_xy[0] + r, place_xy[1] + r, top), "standing rod"
     )

@@ -15,6 +15,11 @@ from services.common.settings import Settings
 
 Array = np.ndarray
 
+# What the tool's collision model leaves out above an object stood on the table: the open jaw's tips
+# (``finger_clearance`` and the pad). A way past the object's top is planned this much higher, or the
+# tips would catch it and knock it over (the task's placed object, the grasp's standing rod).
+PLACED_TOP_CLEARANCE_M = 0.03
+
 
 @dataclass(frozen=True)
 class ToolGeometry:

@@ -10,6 +10,7 @@ import numpy as np
 
 from services.common.frames import make_transform, matrix_to_quat_xyzw, rotation_angle_rad, tool_rotation
 from services.common.modes import GripperCommand, MotionKind, TaskKind
+from services.kinematics.tool import PLACED_TOP_CLEARANCE_M
 from services.kinematics.trajectory import JointTrajectory
 from services.task.plan import state_for
 from services.task.planned import PlannedPick
@@ -208,9 +209,6 @@ def park_pose(start: np.ndarray, home: np.ndarray, clear: Callable[[np.ndarray],
     return home
 
 
-PLACED_TOP_CLEARANCE_M = 0.03
-
-
 def placed_box(plan: GraspPlan) -> SeenBox:
     """The placed object's footprint, from the table up to its height."""
     held = plan.held_object
@@ -220,9 +218,7 @@ def placed_box(plan: GraspPlan) -> SeenBox:
         size = list(getattr(held, "size", []) or [0.05, 0.05, 0.05])
         radius, height = max(size[:2]) / 2, size[2]
     p = np.asarray(plan.place_position, dtype=float)
-    # taller by what the collision model leaves out at the open jaw's tips (motion.tool finger
-    # clearance + pad): a way home skimming the top would catch the rod with them and knock it over
-    height += PLACED_TOP_CLEARANCE_M
+    height += PLACED_TOP_CLEARANCE_M  # the open jaw's tips the collision model leaves out
     return SeenBox(
         np.array([p[0] - radius, p[1] - radius, 0.0]), np.array([p[0] + radius, p[1] + radius, height])
     )
