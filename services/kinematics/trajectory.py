@@ -291,6 +291,20 @@ class JointTrajectory:
         q, qd, qdd = self.sample(ts)
         return JointTrajectory(self.joint_names, ts, q, qd, qdd, dict(self.meta))
 
+    def window(self, t0: float, t1: float) -> JointTrajectory:
+        """The part between ``t0`` and ``t1``, restarting at t = 0 (knots kept, ends sampled); a window
+        to the end ends exactly as this one does."""
+        if not (0.0 <= t0 < t1 <= self.duration + 1e-12):
+            raise InvalidInputError(
+                f"window [{t0}, {t1}] s is not within the trajectory's [0, {self.duration}] s"
+            )
+        inner = self.times[(self.times > t0 + 1e-9) & (self.times < t1 - 1e-9)]
+        ts = np.concatenate([[t0], inner, [t1]])
+        q, qd, qdd = self.sample(ts)
+        if t1 >= self.duration:
+            q[-1], qd[-1], qdd[-1] = self.positions[-1], self.velocities[-1], self.accelerations[-1]
+        return JointTrajectory(self.joint_names, ts - t0, q, qd, qdd, dict(self.meta))
+
     def scaled(self, factor: float) -> JointTrajectory:
         """Slowed down uniformly by ``factor`` ≥ 1 (velocity /k, acceleration /k², jerk /k³)."""
         if not (math.isfinite(factor) and factor > 0):

@@ -484,16 +484,6 @@ def _pass_times(traj: JointTrajectory, points: Sequence[Array]) -> list[float]:
     return out
 
 
-def _window(traj: JointTrajectory, t0: float, t1: float) -> JointTrajectory:
-    """The part of ``traj`` between t0 and t1, restarting at t = 0 (knots kept, ends sampled)."""
-    inner = traj.times[(traj.times > t0 + 1e-9) & (traj.times < t1 - 1e-9)]
-    ts = np.concatenate([[t0], inner, [t1]])
-    q, qd, qdd = traj.sample(ts)
-    if t1 >= traj.duration:  # the end of the whole: exactly its goal, at rest
-        q[-1], qd[-1], qdd[-1] = traj.positions[-1], 0.0, 0.0
-    return JointTrajectory(traj.joint_names, ts - t0, q, qd, qdd, dict(traj.meta))
-
-
 CORNER_ROUNDINGS_RAD = (0.3, 0.2, 0.12, 0.06)  # joint-space roundings tried at a corner, largest first
 DEVIATION_STEP_RAD = 0.02  # joint step between the path's tool points a rounded corner is measured from
 # of the tolerance, what the curve's samples may take: the spline timed through them strays a little
@@ -539,8 +529,11 @@ def _round_corners(parts: Sequence[BlendPart], path: Array, corners: list[int]) 
     return out
 
 
-def blend(parts: Sequence[BlendPart], split_period_s: float) -> tuple[list[JointTrajectory] | None, str]:
-    """One time-optimal motion through the parts' joined paths, at rest only at its two ends, cut
+def blend(
+    parts: Sequence[BlendPart], split_period_s: float, start_velocity: Array | None = None
+) -> tuple[list[JointTrajectory] | None, str]:
+    """One time-optimal motion through the parts' joined paths, at rest only at its two ends (or from the
+    joint velocity ``start_velocity`` at its start: the arm already moving along the first part), cut
     back into one trajectory per part (every inner one ends in motion; the cuts on multiples of
     ``split_period_s``, the period the driver streams at, so no streamed step is shortened).
 
@@ -561,18 +554,23 @@ def blend(parts: Sequence[BlendPart], split_period_s: float) -> tuple[list[Joint
     limits = _common_limits(parts)
     try:
         whole = time_parameterize(
-            with_corners(path, rounded), limits, first.names, dt=c.knot_period_s, method="toppra"
+            with_corners(path, rounded),
+            limits,
+            first.names,
+            dt=c.knot_period_s,
+            method="toppra",
+            start_velocity=start_velocity,
         )
     except TrajectoryLimitError as exc:
         if not rounded:
             return None, f"blend not timed: {exc}"
-        return _through_the_waypoints(parts, split_period_s, f"not timed ({exc})")
+        return _through_the_waypoints(parts, split_period_s, f"not timed ({exc})", start_velocity)
     cuts = _pass_times(whole, [p.path[-1] for p in parts[:-1]])
     period = split_period_s
     bounds = [0.0, *(min(round(t / period) * period, whole.duration) for t in cuts), whole.duration]
     if np.any(np.diff(bounds) <= 1e-6):
         return None, "blend: a part is shorter than one streaming period"
-    pieces = [_window(whole, a, b) for a, b in itertools.pairwise(bounds)]
+    pieces = [whole.window(a, b) for a, b in itertools.pairwise(bounds)]
     for k, (p, piece) in enumerate(zip(parts, pieces, strict=True)):
         hit = p.planner.checker.first_collision_in_trajectory(
             piece, p.planner.config.collision_resolution_rad
@@ -580,17 +578,19 @@ def blend(parts: Sequence[BlendPart], split_period_s: float) -> tuple[list[Joint
         if hit is not None:
             what = f"touched {p.planner.checker.explain(hit[1])} in part {k}"
             if rounded:  # the spline timed through a curve strays a little from it
-                return _through_the_waypoints(parts, split_period_s, what)
+                return _through_the_waypoints(parts, split_period_s, what, start_velocity)
             return None, f"blended motion {what}"
     return pieces, ""
 
 
 def _through_the_waypoints(
-    parts: Sequence[BlendPart], split_period_s: float, why: str
+    parts: Sequence[BlendPart], split_period_s: float, why: str, start_velocity: Array | None
 ) -> tuple[list[JointTrajectory] | None, str]:
     """The blend again without rounded corners, after the rounded one failed for ``why``."""
     log.info("the blend with rounded corners %s: through the waypoints instead", why)
-    return blend([dataclasses.replace(p, corner_tolerance_m=0.0) for p in parts], split_period_s)
+    return blend(
+        [dataclasses.replace(p, corner_tolerance_m=0.0) for p in parts], split_period_s, start_velocity
+    )
 
 
 def time_runs(
@@ -599,11 +599,17 @@ def time_runs(
     split_period_s: float,
     start: Array,
     names: tuple[str, ...],
+    start_velocity: Array | None = None,
 ) -> tuple[list[JointTrajectory], list[str]]:
     """One trajectory per waypoint, and notes: each run of moves joined by waypoints that ``blends``
     marks is timed as one blended motion cut into its parts (:func:`blend`), every other move on its
     own, and so is each move of a run that cannot be blended (it keeps its stops, noted). A blended
-    part is never timed on its own. A None part (already there) holds where the arm is."""
+    part is never timed on its own. A None part (already there) holds where the arm is.
+
+    ``start_velocity`` (nonzero): the arm is moving at ``start``; the first run is timed from that
+    motion, as one blend even of a single move, or TrajectoryLimitError (it cannot stop at a waypoint
+    it was not planned to stop at)."""
+    moving = start_velocity is not None and bool(np.any(np.asarray(start_velocity) != 0.0))
     pieces: list[JointTrajectory] = []
     notes: list[str] = []
     q = start
@@ -614,7 +620,13 @@ def time_runs(
             end += 1
         run = [p for p in parts[k : end + 1] if p is not None]
         blended: list[JointTrajectory] | None = None
-        if len(run) > 1:
+        if moving and k == 0:
+            if parts[0] is None:
+                raise InvalidInputError("the arm is moving at the start: its first move cannot be none")
+            blended, why = blend(run, split_period_s, start_velocity)
+            if blended is None:
+                raise TrajectoryLimitError(f"no motion from the arm's motion at the start: {why}")
+        elif len(run) > 1:
             blended, why = blend(run, split_period_s)
             if blended is None:
                 notes.append(f"waypoints {k}..{end} stop at every waypoint: {why}")

@@ -60,6 +60,18 @@ def _joints(values: Iterable[float], name: str) -> Array:
     return arr
 
 
+def _start_velocity(values: Iterable[float], dof: int) -> Array | None:
+    """A request's start velocity: None at rest (empty or all zero); one finite value per joint."""
+    v = np.asarray(list(values), dtype=np.float64)
+    if v.size == 0:
+        return None
+    if v.size != dof:
+        raise InvalidInputError(f"start_velocity has {v.size} values for {dof} start joints")
+    if not np.all(np.isfinite(v)):
+        raise InvalidInputError("start_velocity contains NaN or infinite values")
+    return v if bool(np.any(v != 0.0)) else None
+
+
 CEILING_HALF_SPAN_M = 10.0  # the box standing for the workspace's top: wider than any arm's reach
 
 
@@ -231,6 +243,7 @@ class MotionPlannerServicer(motion_pb2_grpc.MotionPlannerServicer):
             if not request.waypoints:
                 raise InvalidInputError("a waypoint plan needs at least one waypoint")
             start = q = _joints(request.start, "start")
+            start_velocity = _start_velocity(request.start_velocity, start.size)
             names: tuple[str, ...] = ()
             parts: list[BlendPart | None] = []  # per waypoint: its checked path (None: already there)
             paths, used = [q[None]], []
@@ -273,7 +286,9 @@ class MotionPlannerServicer(motion_pb2_grpc.MotionPlannerServicer):
                 q = found.path[-1]
             t_timing = time.perf_counter()
             blends = [w.blend for w in request.waypoints]
-            pieces, timing_notes = time_runs(parts, blends, self.settings.robot.servo_period_s, start, names)
+            pieces, timing_notes = time_runs(
+                parts, blends, self.settings.robot.servo_period_s, start, names, start_velocity
+            )
             notes += timing_notes
             timing_s = time.perf_counter() - t_timing
             whole = JointTrajectory.hold(names, start)

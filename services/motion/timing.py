@@ -28,7 +28,14 @@ from ruckig import InputParameter, OutputParameter, Result, Ruckig, RuckigError,
 
 from services.common.errors import InvalidInputError, TrajectoryLimitError
 from services.kinematics.interpolation import arc_lengths
-from services.kinematics.trajectory import Array, JointLimits, JointTrajectory, joint_path, verify_trajectory
+from services.kinematics.trajectory import (
+    Array,
+    JointLimits,
+    JointTrajectory,
+    joint_path,
+    joint_vector,
+    verify_trajectory,
+)
 
 log = logging.getLogger("pickplace.motion.timing")
 # toppra logs its numerical failures at WARNING with its own handler (each line came out twice); a
@@ -37,6 +44,12 @@ logging.getLogger("toppra").setLevel(logging.ERROR)
 
 DEFAULT_DT = 0.01  # s between knots (the driver resamples at its ServoJ period)
 _SAFETY_STEPS = (0.97, 0.9, 0.8, 0.65)
+# how closely the arm's velocity at the start of a path timed from motion must point along the path
+# (cosine of the angle to the chord over its first two steps)
+START_ALIGNMENT = 0.95
+# a motion timed from the arm's motion cannot be slowed uniformly (its start speed is given): what
+# TOPP-RA's grid leaves over a tightened limit by this share at most is kept as it is
+MOVING_START_SLACK = 1e-3
 # TOPP-RA's collocation can leave a grid point next to the end of the path at a near-zero path speed
 # (inside the clamped spline's last knot interval, where it curves hard): seed 1068 of the eval crept
 # 9.6 s over the last 0.1° of a 2.4 s blend, and 1103 and 1197 alike (3 in 200). A grid interval this
@@ -170,7 +183,13 @@ def _dedupe(path: Array) -> Array:
 
 
 def _toppra_profile(
-    geometric: object, limits: JointLimits, scale: float, n_grid: int, knots: Array | None = None
+    geometric: object,
+    limits: JointLimits,
+    scale: float,
+    n_grid: int,
+    knots: Array | None = None,
+    sd_start: float = 0.0,
+    velocity_scale: float | None = None,
 ) -> tuple[Array, Array]:
     """TOPP-RA's maximal path velocity ṡ at grid points of s ∈ [0, 1] under velocity/acceleration limits.
 
@@ -180,8 +199,9 @@ def _toppra_profile(
     spline beyond any limit unseen: seen 8× the acceleration limit there (seed 1012 of the eval, the way
     down to above the place), and the whole blended run was then slowed threefold to mend it. When
     TOPP-RA finds no timing on that grid, it is asked again with the uniform points that lie a sliver
-    from a knot left out (``GRID_KNOT_CLEARANCE``)."""
-    vlim = limits.max_velocity * scale
+    from a knot left out (``GRID_KNOT_CLEARANCE``). ``sd_start``: the path velocity it starts at, under ``velocity_scale`` of the velocity limits (default:
+    ``scale``)."""
+    vlim = limits.max_velocity * (scale if velocity_scale is None else velocity_scale)
     alim = limits.max_acceleration * scale
     constraints = [
         ta_constraint.JointVelocityConstraint(np.column_stack([-vlim, vlim])),
@@ -189,7 +209,9 @@ def _toppra_profile(
     ]
 
     def solve(grid: Array) -> tuple[Array, Array]:
-        result = ta_algo.TOPPRA(constraints, geometric, gridpoints=grid).compute_parameterization(0.0, 0.0)
+        result = ta_algo.TOPPRA(constraints, geometric, gridpoints=grid).compute_parameterization(
+            sd_start, 0.0
+        )
         sd = np.asarray(result[1], dtype=float)
         if sd.shape != grid.shape or not np.all(np.isfinite(sd)):
             raise TrajectoryLimitError("TOPP-RA found no feasible timing for the path")
@@ -241,23 +263,23 @@ class _ConstAccelProfile:
 
 
 def _smooth_profile(
-    profile: _ConstAccelProfile, jerk_s: float, dt: float
+    profile: _ConstAccelProfile, jerk_s: float, dt: float, sd_start: float = 0.0
 ) -> tuple[Array, Array, Array, Array]:
-    """Follow s(t) with a 1-D ruckig filter of path jerk ``jerk_s``.
+    """Follow s(t) with a 1-D ruckig filter of path jerk ``jerk_s``, from the path velocity ``sd_start``.
 
     The motion stays exactly on the path (only its timing lags the reference) and
     ends at s = 1 at rest. Returns (t, s, ṡ, s̈) every ``dt``.
     """
-    vmax = max(float(np.max(profile.sd0)), 1e-6)
+    vmax = max(float(np.max(profile.sd0)), sd_start, 1e-6)
     amax = max(float(np.max(np.abs(profile.sdd))), 1e-6)
     otg = Ruckig(1, dt)
     inp = InputParameter(1)
     out = OutputParameter(1)
     inp.max_velocity, inp.max_acceleration, inp.max_jerk = [vmax], [amax], [jerk_s]
-    inp.current_position, inp.current_velocity, inp.current_acceleration = [0.0], [0.0], [0.0]
+    inp.current_position, inp.current_velocity, inp.current_acceleration = [0.0], [sd_start], [0.0]
     ts = np.arange(1, math.ceil(profile.duration / dt) + 1, dtype=float) * dt
     s_ref, sd_ref, sdd_ref = profile(ts)
-    rows = [(0.0, 0.0, 0.0, 0.0)]
+    rows = [(0.0, 0.0, sd_start, 0.0)]
     max_steps = ts.size + int(30.0 / dt)
     for step in range(1, max_steps + 1):
         if step >= ts.size:
@@ -294,29 +316,53 @@ def toppra_path(
     *,
     dt: float = DEFAULT_DT,
     scale: float = 1.0,
+    start_velocity: Array | None = None,
 ) -> JointTrajectory:
     """Near time-optimal timing along a cubic spline through ``path`` (TOPP-RA), jerk-limited when the
-    limits carry jerk.
+    limits carry jerk; from rest, or from the joint velocity ``start_velocity`` (the arm in motion at
+    the path's start, along it: the spline leaves its first point in that direction).
 
     The spline's parameter is the normalised chord length, so it passes through
     every waypoint; the caller checks the spline for collisions. Jerk: TOPP-RA's
     bang-bang path acceleration is followed by a 1-D ruckig filter on the path
     parameter (the motion stays exactly on the spline, only its timing changes);
     whatever still exceeds a limit is then removed by slowing the whole motion
-    uniformly (velocity ∝ 1/k, acceleration ∝ 1/k², jerk ∝ 1/k³).
+    uniformly (velocity ∝ 1/k, acceleration ∝ 1/k², jerk ∝ 1/k³) — from rest only: a motion
+    that starts in motion keeps its start velocity, and is refused instead.
     """
     p = _dedupe(joint_path(path, limits.dof, "path"))
-    if p.shape[0] == 1:
+    v0 = None if start_velocity is None else joint_vector(start_velocity, limits.dof, "start velocity")
+    moving = v0 is not None and float(np.max(np.abs(v0))) > 0.0
+    if p.shape[0] == 1 and not moving:
         return JointTrajectory.hold(joint_names, p[0])
-    if p.shape[0] == 2:
+    if p.shape[0] == 2 and not moving:
         return ruckig_move(p[0], p[1], limits, joint_names, dt=dt, scale=scale)
+    if moving and p.shape[0] < 3:
+        raise TrajectoryLimitError("a motion from the arm's motion needs a path of three points or more")
     chord = arc_lengths(p)
     knots = chord / chord[-1]
-    geometric = toppra.SplineInterpolator(knots, p, bc_type="clamped")
+    sd_start = 0.0
+    v_scale = scale
+    bc: object = "clamped"
+    if v0 is not None and moving:
+        # the spline leaves the start along the arm's velocity, at the chord's own rate (|dq/ds| = the
+        # path's length): the path velocity is then |v0| / length
+        speed = float(np.linalg.norm(v0))
+        ahead = p[min(2, p.shape[0] - 1)] - p[0]
+        if float(v0 @ ahead) < START_ALIGNMENT * speed * float(np.linalg.norm(ahead)):
+            raise TrajectoryLimitError("the arm's motion at the start of the path is not along it")
+        bc = ((1, v0 * (chord[-1] / speed)), (1, np.zeros(limits.dof)))
+        sd_start = speed / float(chord[-1])
+        # a motion at a tightened limit goes on from one at that limit: its velocity limit is never
+        # tightened below the speed it starts at (TOPP-RA finds no timing from outside its limits)
+        v_scale = max(scale, min(1.0, float(np.max(np.abs(v0) / limits.max_velocity)) * (1.0 + 1e-6)))
+    geometric = toppra.SplineInterpolator(knots, p, bc_type=bc)
     n_grid = min(1000, max(100, 25 * p.shape[0]))
-    profile = _ConstAccelProfile(*_toppra_profile(geometric, limits, scale, n_grid, knots))
+    profile = _ConstAccelProfile(*_toppra_profile(geometric, limits, scale, n_grid, knots, sd_start, v_scale))
     if _stalls(profile):
-        denser = _ConstAccelProfile(*_toppra_profile(geometric, limits, scale, n_grid + n_grid // 2, knots))
+        denser = _ConstAccelProfile(
+            *_toppra_profile(geometric, limits, scale, n_grid + n_grid // 2, knots, sd_start, v_scale)
+        )
         log.debug(
             "TOPP-RA crept %.2f s over one grid interval: %.2f s on a denser grid",
             np.max(profile.dt),
@@ -331,17 +377,26 @@ def toppra_path(
         dense = np.linspace(0.0, 1.0, 400)
         dq = np.max(np.abs(np.asarray(geometric(dense, 1))), axis=0)
         jerk_s = float(np.min(limits.max_jerk * scale / np.maximum(dq, 1e-9)))
-        ts, s, s_d, s_dd = _smooth_profile(profile, jerk_s, dt)
+        ts, s, s_d, s_dd = _smooth_profile(profile, jerk_s, dt, sd_start)
     q = np.asarray(geometric(s))
     q1 = np.asarray(geometric(s, 1))
     q2 = np.asarray(geometric(s, 2))
     qd = q1 * s_d[:, None]
     qdd = q2 * (s_d**2)[:, None] + q1 * s_dd[:, None]
     q[0], q[-1] = p[0], p[-1]
-    qd[0] = qd[-1] = 0.0
-    qdd[0] = qdd[-1] = 0.0
+    qd[0] = v0 if v0 is not None else 0.0
+    qd[-1] = 0.0
+    qdd[-1] = 0.0
+    if not moving:
+        qdd[0] = 0.0
     traj = JointTrajectory(tuple(joint_names), ts, q, qd, qdd)
-    k = _slowdown_factor(traj, limits, scale)
+    k = _slowdown_factor(traj, limits, scale, v_scale)
+    if moving:  # (within the verification's tolerance of a tightened limit: as it is)
+        if k > 1.0 + MOVING_START_SLACK:
+            raise TrajectoryLimitError(
+                f"timed from the arm's motion, the path exceeds the limits {k:.3f}-fold"
+            )
+        return traj
     return traj.scaled(k) if k > 1.0 else traj
 
 
@@ -351,7 +406,9 @@ def _stalls(profile: _ConstAccelProfile) -> bool:
     return longest > STALL_INTERVAL_S and longest > STALL_SHARE * profile.duration
 
 
-def _slowdown_factor(traj: JointTrajectory, limits: JointLimits, scale: float) -> float:
+def _slowdown_factor(
+    traj: JointTrajectory, limits: JointLimits, scale: float, velocity_scale: float | None = None
+) -> float:
     """Uniform time-scale factor that brings velocity, acceleration and mean jerk within limits.
 
     Acceleration as :func:`verify_trajectory` judges it: at the knots and as their stream (second
@@ -361,7 +418,8 @@ def _slowdown_factor(traj: JointTrajectory, limits: JointLimits, scale: float) -
     from full acceleration to full deceleration the quintic overshoots by a third of the switch, and
     slowing each run for that bend no streamed position shows cost 5-17 % of every TOPP-RA run.
     """
-    v = float(np.max(np.abs(traj.velocities) / (limits.max_velocity * scale)))
+    v_scale = scale if velocity_scale is None else velocity_scale
+    v = float(np.max(np.abs(traj.velocities) / (limits.max_velocity * v_scale)))
     a_limit = limits.max_acceleration * scale
     a = float(np.max(np.abs(traj.accelerations) / a_limit))
     if len(traj) > 2:
@@ -381,8 +439,10 @@ def time_parameterize(
     *,
     dt: float = DEFAULT_DT,
     method: str = "auto",
+    start_velocity: ArrayLike | None = None,
 ) -> JointTrajectory:
-    """Time a joint path at rest at both ends and verify the result against ``limits``.
+    """Time a joint path at rest at both ends (or from the joint velocity ``start_velocity``: the arm in
+    motion along the path at its start; TOPP-RA only) and verify the result against ``limits``.
 
     ``method``:
     - ``toppra``: TOPP-RA along a cubic spline through the waypoints (jerk-filtered
@@ -407,6 +467,11 @@ def time_parameterize(
     p = _dedupe(joint_path(path, limits.dof, "path"))
     for k in range(p.shape[0]):
         limits.check_positions(p[k], f"path point {k}")
+    if start_velocity is not None:
+        v0 = joint_vector(start_velocity, limits.dof, "start velocity")
+        if method not in ("auto", "toppra"):
+            raise InvalidInputError(f"a motion that starts in motion is timed by TOPP-RA, not {method}")
+        return _timed_verified(p, limits, joint_names, dt, "toppra", v0)
     if p.shape[0] <= 2:
         methods = ["rest_to_rest"]
     elif method == "auto":
@@ -433,7 +498,12 @@ def time_parameterize(
 
 
 def _timed_verified(
-    p: Array, limits: JointLimits, joint_names: Sequence[str], dt: float, method: str
+    p: Array,
+    limits: JointLimits,
+    joint_names: Sequence[str],
+    dt: float,
+    method: str,
+    start_velocity: Array | None = None,
 ) -> JointTrajectory:
     last_error: TrajectoryLimitError | None = None
     for scale in _SAFETY_STEPS:
@@ -441,8 +511,11 @@ def _timed_verified(
             if method == "rest_to_rest":
                 traj = rest_to_rest(p, limits, joint_names, dt=dt, scale=scale)
             else:
-                traj = toppra_path(p, limits, joint_names, dt=dt, scale=scale)
-            report = verify_trajectory(traj, limits, start=p[0], goal=p[-1])
+                traj = toppra_path(p, limits, joint_names, dt=dt, scale=scale, start_velocity=start_velocity)
+            moving = start_velocity is not None and bool(np.any(start_velocity != 0.0))
+            report = verify_trajectory(traj, limits, start=p[0], goal=p[-1], at_rest=not moving)
+            if moving and float(np.max(np.abs(traj.velocities[-1]))) > 1e-6:
+                raise TrajectoryLimitError("trajectory does not end at rest")
         except TrajectoryLimitError as exc:
             log.debug("%s timing at %.0f %% of the limits failed: %s", method, scale * 100, exc)
             last_error = exc

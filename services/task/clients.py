@@ -274,12 +274,18 @@ class GrpcMotion:
         return None
 
     async def plan_moves(
-        self, start: np.ndarray, moves: Sequence[Move], obstacles: tuple[SeenBox, ...]
+        self,
+        start: np.ndarray,
+        moves: Sequence[Move],
+        obstacles: tuple[SeenBox, ...],
+        start_velocity: np.ndarray | None = None,
     ) -> list[JointTrajectory | None]:
         """One PlanWaypoints request; a move carrying the object (or slowed) has its own scene/options."""
         if not moves:
             return []
         req = motion_pb2.PlanWaypointsRequest(start=start.tolist(), scene=self._scene(obstacles, None))
+        if start_velocity is not None:
+            req.start_velocity.extend(np.asarray(start_velocity, dtype=float).tolist())
         for m in moves:
             wp = motion_pb2.MotionWaypoint(
                 motion=MOTION_TYPE[m.kind],

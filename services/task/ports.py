@@ -171,10 +171,15 @@ class Move:
 
 class MotionPort(Protocol):
     async def plan_moves(
-        self, start: np.ndarray, moves: Sequence[Move], obstacles: tuple[SeenBox, ...]
+        self,
+        start: np.ndarray,
+        moves: Sequence[Move],
+        obstacles: tuple[SeenBox, ...],
+        start_velocity: np.ndarray | None = None,
     ) -> list[JointTrajectory | None]:
         """All ``moves`` in one request, each from where the previous one ends; one entry per move,
-        None for a joint move to where the arm already is."""
+        None for a joint move to where the arm already is. ``start_velocity``: the arm moves at
+        ``start`` (along the first move), and the first blended run is timed from that motion."""
 
     async def tool_pose(self, q: np.ndarray) -> np.ndarray: ...
 

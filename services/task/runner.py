@@ -138,9 +138,13 @@ class PublishedPlans:
         return await self.motion.tool_pose(q)
 
     async def plan_moves(
-        self, start: np.ndarray, moves: Sequence[Move], obstacles: tuple[SeenBox, ...]
+        self,
+        start: np.ndarray,
+        moves: Sequence[Move],
+        obstacles: tuple[SeenBox, ...],
+        start_velocity: np.ndarray | None = None,
     ) -> list[JointTrajectory | None]:
-        planned = await self.motion.plan_moves(start, moves, obstacles)
+        planned = await self.motion.plan_moves(start, moves, obstacles, start_velocity)
         try:
             self.publish(self.message(planned, moves, obstacles))
         except Exception:  # the view of a plan must never fail the cycle: logged, the plan goes on

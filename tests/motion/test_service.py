@@ -321,3 +321,71 @@ async def test_moves_are_planned_below_the_workspace_top(stub, kin, settings):
     traj = JointTrajectory.from_proto(resp.trajectory)
     assert np.allclose(traj.positions[-1], goal)
     assert max(kin.fk(q)[2, 3] for q in traj.positions) <= top
+
+
+async def test_a_plan_from_the_moving_arm_takes_over_the_tail_of_its_motion(stub, kin):
+    """The arm on its way to above the object, the grasp line known since it set off: the rest of the
+    way there and the line down, planned from where the arm will be and as fast as it will move there,
+    flow on from the motion under way instead of stopping above the object."""
+    q_far = Q_PICK + np.deg2rad([40, -10, 10, 0, 0, 0])
+    down = kin.fk(Q_PICK)
+    down[2, 3] -= 0.06
+    period = 0.03
+    setting_off = motion_pb2.PlanWaypointsRequest(
+        start=q_far.tolist(),
+        waypoints=[motion_pb2.MotionWaypoint(motion=motion_pb2.MotionWaypoint.JOINT, joints=Q_PICK.tolist())],
+    )
+    first = JointTrajectory.from_proto((await stub.PlanWaypoints(setting_off)).segments[0])
+    head = first.window(0.0, round(first.duration / 2 / period) * period)
+    q_cut, v_cut = head.positions[-1], head.velocities[-1]
+
+    def request(velocity: list[float]) -> motion_pb2.PlanWaypointsRequest:
+        return motion_pb2.PlanWaypointsRequest(
+            start=q_cut.tolist(),
+            start_velocity=velocity,
+            waypoints=[
+                motion_pb2.MotionWaypoint(
+                    motion=motion_pb2.MotionWaypoint.JOINT,
+                    joints=Q_PICK.tolist(),
+                    blend=True,
+                    blend_tolerance_m=0.01,
+                    label="above",
+                ),
+                motion_pb2.MotionWaypoint(motion=motion_pb2.MotionWaypoint.LINEAR, pose=matrix_to_pose(down)),
+            ],
+        )
+
+    on = await stub.PlanWaypoints(request(v_cut.tolist()))
+    rest, line = (JointTrajectory.from_proto(s) for s in on.segments)
+    assert np.array_equal(rest.positions[0], q_cut) and np.allclose(rest.velocities[0], v_cut)
+    assert rest.ends_in_motion and not line.ends_in_motion  # through above the object without a stop
+    assert np.allclose(kin.fk(line.positions[-1])[:3, 3], down[:3, 3], atol=1e-4)
+    # the head then the way on, as the driver streams them: no step beyond the acceleration limit
+    limits = JointLimits.from_spec(kin.spec)
+    whole = head.append(JointTrajectory.from_proto(on.trajectory))
+    ts = np.minimum(np.arange(0, math.ceil(whole.duration / period) + 1) * period, whole.duration)
+    stream = whole.sample(ts, derivatives=0)[0]
+    assert (
+        float(np.max(np.abs(np.diff(stream[:-1], 2, axis=0)) / period**2 / limits.max_acceleration)) < 1.001
+    )
+    # faster than stopping above the object and going down from rest
+    at_rest = await stub.PlanWaypoints(
+        motion_pb2.PlanWaypointsRequest(
+            start=Q_PICK.tolist(),
+            waypoints=[
+                motion_pb2.MotionWaypoint(motion=motion_pb2.MotionWaypoint.LINEAR, pose=matrix_to_pose(down))
+            ],
+        )
+    )
+    assert head.duration + on.duration_s < first.duration + at_rest.duration_s - 0.05
+    # at rest (zeros) it is an ordinary plan from rest
+    still = await stub.PlanWaypoints(request([0.0] * 6))
+    assert not JointTrajectory.from_proto(still.segments[0]).starts_in_motion
+    # a velocity of the wrong shape, not finite, or not along the first move: refused by name
+    for bad, code, words in (
+        ([1.0, 2.0], grpc.StatusCode.INVALID_ARGUMENT, "start_velocity has 2 values"),
+        ([math.nan] * 6, grpc.StatusCode.INVALID_ARGUMENT, "start_velocity contains NaN"),
+        ((-v_cut).tolist(), grpc.StatusCode.FAILED_PRECONDITION, "not along it"),
+    ):
+        err = await _error(stub.PlanWaypoints, request(bad))
+        assert err.code() == code and words in err.details(), err.details()

@@ -38,7 +38,11 @@ class Motion:
         self.calls = 0
 
     async def plan_moves(
-        self, start: np.ndarray, moves: Sequence[Move], obstacles: tuple[SeenBox, ...]
+        self,
+        start: np.ndarray,
+        moves: Sequence[Move],
+        obstacles: tuple[SeenBox, ...],
+        start_velocity: np.ndarray | None = None,
     ) -> list[JointTrajectory | None]:
         self.calls += 1
         return [straight(start, self.q_goal), None][: len(moves)]

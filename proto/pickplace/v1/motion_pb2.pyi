@@ -181,16 +181,18 @@ class MotionWaypoint(_message.Message):
     def __init__(self, motion: _Optional[_Union[MotionWaypoint.MotionType, str]] = ..., pose: _Optional[_Union[_common_pb2.Pose, _Mapping]] = ..., joints: _Optional[_Iterable[float]] = ..., label: _Optional[str] = ..., scene: _Optional[_Union[PlanningScene, _Mapping]] = ..., options: _Optional[_Union[MotionOptions, _Mapping]] = ..., blend: _Optional[bool] = ..., blend_tolerance_m: _Optional[float] = ...) -> None: ...
 
 class PlanWaypointsRequest(_message.Message):
-    __slots__ = ("start", "waypoints", "scene", "options")
+    __slots__ = ("start", "waypoints", "scene", "options", "start_velocity")
     START_FIELD_NUMBER: _ClassVar[int]
     WAYPOINTS_FIELD_NUMBER: _ClassVar[int]
     SCENE_FIELD_NUMBER: _ClassVar[int]
     OPTIONS_FIELD_NUMBER: _ClassVar[int]
+    START_VELOCITY_FIELD_NUMBER: _ClassVar[int]
     start: _containers.RepeatedScalarFieldContainer[float]
     waypoints: _containers.RepeatedCompositeFieldContainer[MotionWaypoint]
     scene: PlanningScene
     options: MotionOptions
-    def __init__(self, start: _Optional[_Iterable[float]] = ..., waypoints: _Optional[_Iterable[_Union[MotionWaypoint, _Mapping]]] = ..., scene: _Optional[_Union[PlanningScene, _Mapping]] = ..., options: _Optional[_Union[MotionOptions, _Mapping]] = ...) -> None: ...
+    start_velocity: _containers.RepeatedScalarFieldContainer[float]
+    def __init__(self, start: _Optional[_Iterable[float]] = ..., waypoints: _Optional[_Iterable[_Union[MotionWaypoint, _Mapping]]] = ..., scene: _Optional[_Union[PlanningScene, _Mapping]] = ..., options: _Optional[_Union[MotionOptions, _Mapping]] = ..., start_velocity: _Optional[_Iterable[float]] = ...) -> None: ...
 
 class PlanResponse(_message.Message):
     __slots__ = ("trajectory", "planner", "planning_time_s", "timing_time_s", "duration_s", "path_points", "notes", "velocity_ratio", "acceleration_ratio", "jerk_ratio", "segments")
