@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import AsyncIterator
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -16,7 +17,7 @@ import pytest
 
 from bench.bench_robot import RecordingProxy, limit_violations
 from services.common.errors import LimitViolationError
-from services.common.settings import WorkspaceBounds
+from services.common.settings import WorkspaceBounds, load_settings
 from services.dobot import RobotMode
 from services.kinematics.interpolation import quintic_move
 from services.kinematics.robot_models import NOVA5
@@ -71,6 +72,30 @@ def test_a_stream_too_short_to_reach_its_plan_says_so():
     k = len(targets) // 2  # two targets left of a stream that goes on at speed (a continuing one)
     res = retime_from_rest(targets[k - 1], targets[k : k + 2], PERIOD, LIMITS)
     assert not res.reaches_plan and np.array_equal(res.targets[-1], targets[k + 1])
+
+
+def test_a_short_stream_at_its_limits_that_ends_in_motion_is_resumed_to_rest_at_its_end():
+    """Seed 1000 of the eval under load: the 18 targets of the line out of the release (it flows on into
+    the way home, its joints at their acceleration limit) ran dry at their first. No ramp short enough
+    to reach the plan's rate stays within the limits, and a longer one reached the last target at speed
+    (753°/s² as it stopped there): the rest goes from rest to rest along the same path instead, and what
+    was to continue it is planned again from there (``reaches_plan`` False)."""
+    case = np.load(Path(__file__).parent / "data" / "short_stream_ending_in_motion.npz")
+    rest, remaining, period = case["q_rest"], case["remaining"], float(case["period"])
+    limits = SafetyLimits(NOVA5, load_settings("sim", overrides={"logging": {"file": None}}).robot.workspace)
+    res = retime_from_rest(rest, remaining, period, limits)
+    assert not res.reaches_plan
+    LIMITS.check_velocities(res.targets, period, q_start=rest)
+    limits.check_accelerations(res.targets, period, np.vstack([rest, rest]))
+    limits.check_accelerations(res.targets[-1:], period, res.targets[-2:])  # and then holds it, at rest
+    assert np.array_equal(res.targets[-1], remaining[-1])
+    # along the plan's own path: every target on the polyline through the plan's targets
+    path = np.vstack([rest, remaining])
+    for q in res.targets:
+        seg = np.clip(
+            ((q - path[:-1]) * (path[1:] - path[:-1])).sum(1) / ((path[1:] - path[:-1]) ** 2).sum(1), 0, 1
+        )
+        assert np.min(np.max(np.abs(path[:-1] + seg[:, None] * (path[1:] - path[:-1]) - q), axis=1)) < 1e-9
 
 
 def test_the_window_holds_the_learned_margin_in_host_time_at_any_simulator_speed():
