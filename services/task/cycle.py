@@ -44,6 +44,7 @@ from services.common.modes import GripperCommand, MotionKind, TaskKind
 from services.kinematics.trajectory import JointTrajectory
 from services.task.cycle_config import CycleConfig
 from services.task.deadline import within
+from services.task.flow_on import FLOWS_ON_BELOW_RATE
 from services.task.moves import (
     grasp_approach,
     is_last_of,
@@ -73,6 +74,7 @@ from services.task.ports import (
 )
 from services.task.recording import RecordingRobot
 from services.task.recovery import Action, Attempts, decide
+from services.task.set_off_run import SetOffRun
 from services.task.states import CycleState, PickOutcome
 from services.task.straighten import held_rod_query, straightening, turn_from, turned
 
@@ -90,11 +92,19 @@ Wait = Callable[[float], Awaitable[None]]
 
 @dataclass(frozen=True)
 class SetOff:
-    """The arm on its way to above the object while the grasp plans: the move, and where it goes from/to."""
+    """The arm on its way to above the object while the grasp plans: the move under way, and the run
+    that sends it (where it goes from and to, and whether it went on down the grasp line)."""
 
     moving: asyncio.Future[MoveOutcome]
-    start: np.ndarray
-    end: np.ndarray
+    run: SetOffRun
+
+    @property
+    def start(self) -> np.ndarray:
+        return self.run.start
+
+    @property
+    def end(self) -> np.ndarray:
+        return self.run.end
 
 
 class CycleAborted(Exception):
@@ -133,6 +143,7 @@ class Orchestrator:
         self._lift_check: asyncio.Future[bool | None] | None = None
         self._grasp_raise_m = 0.0  # this cycle's next grasps go this much higher than seen
         self._set_off: SetOff | None = None  # the move toward the object while its grasp plans
+        self._cycle_start = (0.0, 0.0)  # (clock, wall) at the cycle's start
         # the grasp and motion planners, and the arm against the camera's view of the pick zone
         self._planning = PickPlanning(grasp, motion, self.config, view)
 
@@ -188,6 +199,7 @@ class Orchestrator:
     async def run(self, task: TaskKind | str = TaskKind.STAND_ROD) -> PickOutcome:
         task = TaskKind(task)
         t0 = self._clock()
+        self._cycle_start = (t0, self._wall_clock())
         out = PickOutcome(pick_id=uuid.uuid4().hex, task=task, object_class=task.object_class)
         self._outcome = out
         self._stage_t0 = None  # what happened since the last cycle belongs to no state of this one
@@ -250,7 +262,7 @@ class Orchestrator:
         self._enter(CycleState.PLAN, "setting off toward the object")
         q = await self.robot.joints()
         try:
-            traj = await self._timed(
+            move = await self._timed(
                 self._planning.set_off(task, obs, q),
                 cfg.deadlines.plan_s,
                 "planning the set-off",
@@ -258,13 +270,20 @@ class Orchestrator:
             )
         except PlanningError as exc:  # no time for it: the arm waits for the plan where it is
             log.info("no set-off move: %s", exc)
-            traj = None
-        if traj is None:
+            move = None
+        if move is None:
             return await self._plan(task, obs, out, attempts)
-        moving = asyncio.ensure_future(
-            self._arm(self.robot.execute(traj), cfg.deadlines.motion_s, "setting off toward the object")
+        flows_on = (
+            cfg.set_off_flows_on
+            and move.on_approach
+            and self._clock_rate() < FLOWS_ON_BELOW_RATE
+            and await self._jaws_opened()
         )
-        self._set_off = SetOff(moving, q, traj.positions[-1])
+        run = SetOffRun(move, q, cfg.servo_period_s, flows_on)
+        moving = asyncio.ensure_future(
+            self._arm(run.run(self.robot), cfg.deadlines.motion_s, "setting off toward the object")
+        )
+        self._set_off = SetOff(moving, run)
         self._enter(CycleState.APPROACH, "set off toward the object; its grasp plans meanwhile")
         planning = asyncio.ensure_future(self._plan(task, obs, out, attempts, moving=True))
         try:
@@ -273,7 +292,10 @@ class Orchestrator:
                 await self._arrived()  # a safety stop on the way: raised now, not after the plan
             if not planning.done():
                 self._enter(CycleState.PLAN, "above the object: waiting for its grasp plan")
-            return await planning
+            planned = await planning
+            if not moving.done():  # the rest of the way may flow on down the grasp line
+                run.flow_on(self._planning, planned)
+            return planned
         except Exception:
             # given up on (or a safety stop): the arm ends the move it is on before anything else
             planning.cancel()
@@ -286,11 +308,39 @@ class Orchestrator:
             self._set_off = None
             raise
 
-    async def _arrived(self) -> None:
-        """The set-off move under way (if any) has ended: its failure is the failure of this step."""
+    def _clock_rate(self) -> float:
+        """How fast the controller's clock has run against the host's since the cycle started (a twin at
+        ``--speed N``: about N; 1 on a real cell)."""
+        wall = self._wall_clock() - self._cycle_start[1]
+        return (self._clock() - self._cycle_start[0]) / wall if wall > 0.05 else 1.0
+
+    async def _jaws_opened(self) -> bool:
+        """Open the jaws before setting off (the grasp opens them above the object anyway): the set-off
+        may then flow on down the grasp line. False when they could not be opened (they open above the
+        object then, as the plan says)."""
+        try:
+            await self._arm(self.robot.gripper(False), self.config.deadlines.gripper_s, "gripper open")
+        except SafetyError:
+            raise
+        except RobotError as exc:
+            log.info("jaws not opened before setting off (%s): the arm stops above the object", exc)
+            return False
+        return True
+
+    async def _arrived(self) -> int | None:
+        """The set-off move under way (if any) has ended: its failure is the failure of this step. The
+        waypoint it went on to without stopping (the grasp), if it did; a failure on that way down is
+        that waypoint's."""
         set_off, self._set_off = self._set_off, None
-        if set_off is not None:
+        if set_off is None:
+            return None
+        try:
             await set_off.moving
+        except BaseException:
+            if set_off.run.went_on_to is not None:
+                self._progress = Progress(set_off.run.went_on_to)
+            raise
+        return set_off.run.went_on_to
 
     async def _carry_out(
         self, planned: PlannedPick, obs: Observation, out: PickOutcome, attempts: Attempts
@@ -308,7 +358,10 @@ class Orchestrator:
     ) -> bool:
         while True:
             try:
-                await self._arrived()
+                if (went_on_to := await self._arrived()) is not None:
+                    # the set-off flowed on down to the grasp: there already, the jaws open
+                    planned.trajs[went_on_to] = None
+                    self._progress = Progress(went_on_to)
                 await self._execute(planned, self._progress)
                 if self.state is not CycleState.DONE:  # the plan's way home already entered it
                     self._enter(CycleState.DONE, "placed; the arm leaves the camera's view clear")

@@ -38,6 +38,10 @@ class CycleConfig:
     # the arm sets off toward the object, this high above it (m), while its grasp plans (0: it waits
     # for the plan at rest)
     set_off_height_m: float = 0.0
+    # the set-off goes out in pieces, and once the grasp plan is in, flows on down the grasp line from
+    # where the arm will be rather than stopping above the object (the jaws opened before it sets off)
+    set_off_flows_on: bool = False
+    servo_period_s: float = 0.03  # the driver's streaming period: the set-off's pieces end on it
     # how far the tool may leave the planned path where a blended run's corner is rounded (0: never)
     corner_tolerance_m: float = 0.0
     # a rod grasped this far off its centre (m; 0: never) is measured held above the place, and turned

@@ -7,7 +7,7 @@ decides when to plan, what to do when planning fails, and executes what this ret
 from __future__ import annotations
 
 import logging
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -20,7 +20,9 @@ from services.task.moves import (
     above_pose,
     blends,
     box_around,
+    grasp_approach,
     horizontal,
+    joined,
     move_to,
     object_id,
     park_pose,
@@ -56,6 +58,19 @@ SET_OFF = "SET_OFF"  # the move toward the object while its grasp plans
 OBJECT_MARGIN_M = 0.0  # the motion scene pads every box already (motion.padding_m)
 
 
+@dataclass(frozen=True)
+class SetOffMove:
+    """The move toward the object while its grasp plans, and the scene it was planned in (everything
+    seen, the object too)."""
+
+    traj: JointTrajectory
+    scene: tuple[SeenBox, ...]
+    # it ends where the first grasp option's approach starts (a rod's: the jaws across it), so the plan
+    # may go straight down from there; a cube's set-off keeps the jaws as they are (its faces are not
+    # known here), and its plan turns them first
+    on_approach: bool = False
+
+
 class PickPlanning:
     """Plans picks for one cell: its grasp and motion planners, the cycle's configuration and the
     camera's view of the pick zone (None: only the safe home leaves it clear)."""
@@ -63,7 +78,7 @@ class PickPlanning:
     def __init__(self, grasp: GraspPort, motion: MotionPort, config: CycleConfig, view: ArmView | None):
         self.grasp, self.motion, self.config, self.view = grasp, motion, config, view
 
-    async def set_off(self, task: TaskKind, obs: Observation, q: np.ndarray) -> JointTrajectory | None:
+    async def set_off(self, task: TaskKind, obs: Observation, q: np.ndarray) -> SetOffMove | None:
         """A joint move from ``q`` to above the object the first option picks (``set_off_height_m`` above
         its centre, the tool straight down, the jaws across a rod the way round nearer their turn at ``q``),
         clear of everything seen, that object included; None when there is none (the arm then waits for
@@ -99,7 +114,56 @@ class PickPlanning:
             # other way, and went back round for the pre-grasp (6.6 + 2.5 s instead of 0.9 s)
             log.info("the pose above the object is in another arm branch than the safe home: not set off")
             return None
-        return traj
+        return SetOffMove(traj, everything, task is TaskKind.STAND_ROD) if traj is not None else None
+
+    async def way_on(
+        self, planned: PlannedPick, set_off: SetOffMove, q: np.ndarray, qd: np.ndarray
+    ) -> tuple[JointTrajectory, int] | None:
+        """The rest of the set-off and the grasp line as one motion from the arm moving at ``q`` with joint
+        velocity ``qd`` on its way, and the grasp waypoint it ends at; None when the plan does not go
+        straight down its approach from where the set-off ends (it stops or moves elsewhere first: a
+        cube's plan turns the jaws to its faces, and a way on through that turn was seen to take
+        0.15-0.23 s to plan on a busy machine and then not to be timeable), or no such motion is found
+        (the set-off then ends at rest as planned). The rest of the set-off keeps its scene (the object
+        too); the corner above the object is rounded within the cycle's tolerance, checked in the scenes
+        of both moves it joins. The jaws must be open already."""
+        plan, end = planned.plan, set_off.traj.positions[-1]
+        g = next((i for i, w in enumerate(plan.waypoints) if w.gripper is GripperCommand.CLOSE), None)
+        if g is None or not grasp_approach(plan, g) or not all(blends(plan, i) for i in range(g)):
+            return None
+        tolerance = self.config.corner_tolerance_m
+        moves = [
+            Move(
+                MotionKind.JOINT,
+                end,
+                label=SET_OFF,
+                blend=True,
+                blend_tolerance_m=tolerance,
+                obstacles=set_off.scene,
+            )
+        ]
+        for i in range(g):
+            m = move_to(plan, i)
+            if m is not None and not (
+                m.kind is MotionKind.JOINT and m.target.ndim == 1 and near(m.target, end)
+            ):
+                return None  # not where the set-off ends (the pre-grasp on the approach line)
+        line = move_to(plan, g)
+        if line is None:
+            return None
+        moves.append(replace(line, blend=False, blend_tolerance_m=0.0))
+        try:
+            planned_moves = await self.motion.plan_moves(q, moves, planned.obstacles, qd)
+        except RobotError as exc:
+            log.info("no way on from the set-off to the grasp without a stop: %s", exc)
+            return None
+        trajs = [t for t in planned_moves if t is not None]
+        if len(trajs) != len(moves):
+            return None
+        way = trajs[0]
+        for t in trajs[1:]:
+            way = joined(way, t)
+        return way, g
 
     async def plan(
         self,

@@ -90,6 +90,8 @@ def cycle_config(settings: Settings) -> CycleConfig:
         straighten_min_deg=t.straighten_min_deg,
         straighten_max_deg=t.straighten_max_deg,
         corner_tolerance_m=t.corner_tolerance_m,
+        set_off_flows_on=t.set_off_before_planned and t.set_off_flows_on,
+        servo_period_s=settings.robot.servo_period_s,
         table_z_m=settings.grasp.table_z_m,
         # where the task stands the rod (None: where it lay, the grasp service's choice)
         place_xy=settings.grasp.rod.place_xy_m,

@@ -13,6 +13,7 @@ from services.apps.evaluation import (
     HARNESS_STAGE,
     MAX_SETTLE_S,
     SETTLE_S,
+    TrialResult,
     busy_processes,
     run_eval,
     write_report,
@@ -79,7 +80,10 @@ async def test_a_seeds_outcome_and_plan_do_not_depend_on_the_cpu_load(tmp_path):
     """The same randomized trials quiet and beside six busy processes (`eval --load 6`, on top of
     whatever else runs): each seed ends the same way, after the same attempts, having executed the
     same plan (its joint waypoints, so its bound on the controller clock). Only the compute the arm
-    waited for may take longer."""
+    waited for may take longer — and whether the set-off flowed on down the grasp line or stopped above
+    the object: that hangs on the plan coming in before the set-off's last piece went out, on the host's
+    time by design (off at speed 3, but a loaded host slows the twin's clock toward the rate it is on
+    below). The pieces' ends are points on the set-off's straight joint line, left out of the comparison."""
     s = cell_settings(tmp_path, sim={"speed": 3.0})
     quiet = await run_eval(s, trials=2, seed=1000, progress=False)
     loaded = await run_eval(s, trials=2, seed=1000, progress=False, load=6)
@@ -95,11 +99,29 @@ async def test_a_seeds_outcome_and_plan_do_not_depend_on_the_cpu_load(tmp_path):
         assert q.harness_error == ld.harness_error == ""
         # the same picture, so the same grasp and plan: up to the lift (before any contact) the same
         # joints to a tenth of a degree
-        qw, lw = np.asarray(q.executed_waypoints), np.asarray(ld.executed_waypoints)
+        (qw, qr), (lw, lr) = _corners(q), _corners(ld)
         assert np.allclose(lw[:4], qw[:4], atol=2e-3) and np.allclose(lw[-1], qw[-1], atol=1e-3)
         # and the same motion in all: where a guarded move felt its contact varies by a millimetre
-        assert ld.bound_motion_s == pytest.approx(q.bound_motion_s, rel=0.03)
+        if qr == lr:  # (the same stops: the set-off stopped above the object in both, or flowed on in both)
+            assert ld.bound_motion_s == pytest.approx(q.bound_motion_s, rel=0.03)
+        else:
+            assert [k for k, (a, b) in enumerate(zip(qr, lr, strict=True)) if a != b] == [1]
     assert quiet.successes == 2  # seeds 1000 and 1001 stand (200/200 from seed 1000 in `pickplace eval`)
+
+
+def _corners(r: TrialResult) -> tuple[np.ndarray, list[bool]]:
+    """A trial's executed joint waypoints and rests without those on the straight joint line between their
+    neighbours (the ends of the set-off's pieces, sent one by one so the rest could be replaced)."""
+    w, rests = np.asarray(r.executed_waypoints), list(r.executed_rests)
+    keep = [0]
+    for k in range(1, len(w) - 1):
+        a, b, c = w[keep[-1]], w[k], w[k + 1]
+        along = c - a
+        u = float(np.clip((b - a) @ along / max(float(along @ along), 1e-12), 0.0, 1.0))
+        if rests[k] or float(np.max(np.abs(a + u * along - b))) > 1e-4:
+            keep.append(k)
+    keep.append(len(w) - 1)
+    return w[keep], [rests[k] for k in keep]
 
 
 async def test_sorted_cubes_are_dropped_into_their_zones(tmp_path):

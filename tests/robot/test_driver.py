@@ -1,6 +1,7 @@
 """RobotDriver over the simulated Dobot: safety checks before sending, trajectories, retries."""
 
 import asyncio
+import dataclasses
 
 import numpy as np
 import pytest
@@ -15,8 +16,10 @@ from services.common.errors import (
 )
 from services.kinematics.interpolation import min_jerk_keypose_trajectory, quintic_move
 from services.kinematics.trajectory import JointLimits, JointTrajectory
+from services.motion.timing import time_parameterize
 from services.robot.resume import ease_in_offset
 from services.robot.service import build_driver
+from services.task.flow_on import pieces
 from tests.conftest import HOME
 
 pytestmark = pytest.mark.integration
@@ -104,6 +107,32 @@ async def test_a_continuing_trajectory_hands_over_in_motion(driver):
     assert np.allclose(done.final_q, goal, atol=1e-6)
     with pytest.raises(InvalidInputError, match="cannot continue"):
         await driver.execute_trajectory(second, 0.03, stop_when=lambda fb: False, continues=True)
+
+
+async def test_a_set_off_sent_in_pieces_flows_on_into_a_way_on_timed_from_its_motion(driver):
+    """The task's set-off (services.task.flow_on): pieces that each flow on into the next, then, instead
+    of the rest of it, a way on timed from where and how fast the arm moves at a piece's end (TOPP-RA
+    from that velocity, services.motion.timing): every target passes the driver's checks across the
+    hand-over and the arm comes to rest at the way on's end."""
+    lim = JointLimits.from_spec(driver.spec)
+    names = driver.spec.joint_names
+    start = driver.joint_positions()
+    above = start + np.deg2rad([35.0, 15.0, -10.0, 0.0, 0.0, 20.0])
+    down = above + np.deg2rad([0.0, 8.0, 4.0, -12.0, 0.0, 0.0])  # a short way on past where it would stop
+    set_off = time_parameterize(np.vstack([start, above]), lim, names)
+    parts = pieces(set_off, 0.03)
+    assert len(parts) >= 3
+    k = len(parts) - 2  # the way on replaces the last piece
+    for part in parts[: k + 1]:
+        await driver.execute_trajectory(part, 0.03, continues=True)
+    cut = parts[k]
+    way = np.vstack([np.linspace(cut.positions[-1], above, 12), np.linspace(above, down, 12)[1:]])
+    on = time_parameterize(
+        way, dataclasses.replace(lim, max_jerk=None), names, start_velocity=cut.velocities[-1]
+    )
+    done = await driver.execute_trajectory(on, 0.03)
+    assert np.allclose(done.final_q, down, atol=1e-3)
+    assert not done.stopped_early and done.resumed == 0
 
 
 async def test_trajectory_start_mismatch_and_overspeed_rejected(driver, sim_server):

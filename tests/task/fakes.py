@@ -189,6 +189,7 @@ class MotionRequest:
     start: tuple[float, ...]
     moves: list[Move]
     obstacles: tuple[SeenBox, ...]
+    start_velocity: tuple[float, ...] | None = None  # the arm moving at the start
 
     @property
     def labels(self) -> list[str]:
@@ -209,10 +210,15 @@ class FakeMotion:
         return found
 
     async def plan_moves(
-        self, start: np.ndarray, moves: Sequence[Move], obstacles: tuple[SeenBox, ...]
+        self,
+        start: np.ndarray,
+        moves: Sequence[Move],
+        obstacles: tuple[SeenBox, ...],
+        start_velocity: np.ndarray | None = None,
     ) -> list[JointTrajectory | None]:
         k = len(self.requests)
-        self.requests.append(MotionRequest(tuple(start), list(moves), obstacles))
+        v0 = None if start_velocity is None else tuple(float(v) for v in start_velocity)
+        self.requests.append(MotionRequest(tuple(start), list(moves), obstacles, v0))
         if k in self.failures:
             raise self.failures[k]
         out: list[JointTrajectory | None] = []
@@ -223,6 +229,8 @@ class FakeMotion:
                 out.append(None)  # already there
                 continue
             traj = line(q, goal, m.label)
+            if v0 is not None and not out:  # from the arm's motion: it starts as fast as the arm moves
+                traj.velocities[0] = v0
             if self.blending and m.blend:
                 traj.velocities[-1] = (goal - q) / traj.duration
             out.append(traj)

@@ -3,19 +3,40 @@
 from __future__ import annotations
 
 import asyncio
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 import pytest
 
-from services.common.errors import ControllerError, EmergencyStopError, PlanningError
+from services.common.errors import (
+    ContinuationLateError,
+    ControllerError,
+    EmergencyStopError,
+    PathDeviationError,
+    PlanningError,
+)
 from services.common.modes import TaskKind
+from services.kinematics.trajectory import JointTrajectory
 from services.task.cycle_config import CycleConfig
+from services.task.flow_on import pieces
+from services.task.moves import joined_at
 from services.task.pick_planning import SET_OFF
-from services.task.ports import GraspPlan, SeenCube
+from services.task.ports import GraspPlan, MoveOutcome, SeenCube
 from services.task.recovery import RetryLimits
 from services.task.states import CycleState
-from tests.task.fakes import HOME, FakeCell, FakeGrasp, FakeRobot, FakeVision, Fault, joints_at, rod_at, seen
+from tests.task.fakes import (
+    HOME,
+    FakeCell,
+    FakeGrasp,
+    FakeRobot,
+    FakeVision,
+    Fault,
+    joints_at,
+    line,
+    rod_at,
+    seen,
+)
 
 HEIGHT = 0.1
 
@@ -191,3 +212,131 @@ def test_the_pre_grasp_is_where_the_set_off_ends_only_on_the_approach_line() -> 
     # off the line, turned otherwise, or too far along it: the pre-grasp stays the plan's
     for off in (at((0.501, 0.1, 0.105)), at((0.5, 0.1, 0.105), turn_deg=0.5), at((0.5, 0.1, 0.13))):
         assert off is plan
+
+
+# --- the set-off flowing on down the grasp line (task.set_off_flows_on) ----------------------------------
+@dataclass
+class PacedRobot(FakeRobot):
+    """The toy arm, each move taking a few turns of the event loop: the grasp plans meanwhile (as on a
+    cell, where a piece of the set-off goes out over 0.06 s)."""
+
+    turns: int = 4
+
+    async def execute(
+        self, traj: JointTrajectory, force_guard_n: float = 0.0, continues: bool = False
+    ) -> MoveOutcome:
+        for _ in range(self.turns):
+            await asyncio.sleep(0)
+        return await super().execute(traj, force_guard_n, continues)
+
+
+def _flowing() -> CycleConfig:
+    return replace(_config(), set_off_flows_on=True, corner_tolerance_m=0.01)
+
+
+def _set_off_pieces(cell: FakeCell) -> list[JointTrajectory]:
+    (req,) = [r for r in cell.motion.requests if r.labels == [SET_OFF]]
+    traj = line(
+        np.asarray(req.start),
+        req.moves[0].target if req.moves[0].target.ndim == 1 else joints_at(req.moves[0].target[:3, 3]),
+    )
+    return pieces(traj, _flowing().servo_period_s)
+
+
+async def test_the_set_off_flows_on_down_the_grasp_line_once_the_plan_is_in() -> None:
+    rod = rod_at(0.5, 0.1)
+    robot = PacedRobot()
+    cell = FakeCell(FakeVision(seen(rod)), robot=robot, config=_flowing())
+    outcome = await asyncio.wait_for(cell.run(TaskKind.STAND_ROD), 60)
+    assert outcome.success
+    assert robot.commands[1:3] == [("gripper", "open"), ("move", SET_OFF, False)]  # open before setting off
+    # the way on: the rest of the set-off (in its scene, the rod too; its corner may be rounded) and the
+    # grasp line, planned from the end of a piece not yet sent, as fast as the arm moves there
+    (way,) = [r for r in cell.motion.requests if r.start_velocity is not None]
+    assert way.labels == [SET_OFF, "GRASP"]
+    rest = way.moves[0]
+    assert rest.blend and rest.blend_tolerance_m == pytest.approx(0.01)
+    assert np.allclose(rest.target, joints_at([0.5, 0.1, 0.011 + HEIGHT]))
+    assert any(np.all(b.min <= rod.center) and np.all(rod.center <= b.max) for b in rest.obstacles)
+    parts = _set_off_pieces(cell)
+    k = next(i for i, p in enumerate(parts) if np.allclose(p.positions[-1], way.start))
+    assert 0 < k < len(parts) - 1 and np.allclose(way.start_velocity, parts[k].velocities[-1])
+    assert np.max(np.abs(way.start_velocity)) > 0.0
+    # the pieces up to there went out flowing on, then the way on to the grasp: no stop above the rod,
+    # no grasp line of its own; the jaws close where the way on ends
+    moves = cell.moves()
+    assert moves[: k + 2] == [SET_OFF] * (k + 2) and "GRASP" not in moves
+    assert robot.continued[: k + 1] == [SET_OFF] * (k + 1)
+    close = robot.commands.index(("gripper", "close"))
+    assert robot.commands[close - 1] == ("move", SET_OFF, False)
+    assert np.allclose(robot.reached[SET_OFF], joints_at(way.moves[1].target[:3, 3]))  # the grasp pose
+
+
+async def test_a_plan_in_after_the_last_piece_went_out_leaves_the_set_off_to_end_at_rest() -> None:
+    grasp = SlowGrasp()
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))), grasp=grasp, robot=PacedRobot(), config=_flowing())
+    recorded = cell.orchestrator._on_state
+    assert recorded is not None
+
+    def on_state(state: CycleState, message: str) -> None:
+        recorded(state, message)
+        if state is CycleState.PLAN and message.startswith("above the object"):
+            grasp.answer.set()
+
+    cell.orchestrator._on_state = on_state
+    outcome = await asyncio.wait_for(cell.run(TaskKind.STAND_ROD), 60)
+    assert outcome.success
+    assert not [r for r in cell.motion.requests if r.start_velocity is not None]
+    n = len(_set_off_pieces(cell))
+    assert cell.moves()[: n + 1] == [SET_OFF] * n + ["GRASP"]  # the grasp line from rest, as before
+
+
+class DeviatingRobot(PacedRobot):
+    """The fingers meet the rod's edge on the way down of the first way on: pushed off its path."""
+
+    async def execute(
+        self, traj: JointTrajectory, force_guard_n: float = 0.0, continues: bool = False
+    ) -> MoveOutcome:
+        if joined_at(traj) and not getattr(self, "deviated", False):
+            self.deviated = True
+            self.q = traj.positions[-1] - 0.3 * (traj.positions[-1] - joined_at(traj)[-1])
+            self.commands.append(("move", "WAY_ON", False))
+            raise PathDeviationError("joint 3 is 2.1° off the path: pushed off it")
+        return await super().execute(traj, force_guard_n, continues)
+
+
+async def test_a_way_on_pushed_off_its_path_on_the_way_down_is_a_failed_grasp_approach() -> None:
+    """As the grasp line would: the arm backs off and another grasp is planned, not the cycle ended."""
+    robot = DeviatingRobot()
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))), robot=robot, config=_flowing())
+    outcome = await asyncio.wait_for(cell.run(TaskKind.STAND_ROD), 60)
+    assert getattr(robot, "deviated", False)
+    assert outcome.success and len(cell.grasp.calls) == 2
+    assert cell.moves()[cell.moves().index("WAY_ON") + 1] == "BACK_OFF"
+
+
+async def test_a_piece_of_the_set_off_too_late_leaves_the_arm_where_it_rests_and_the_pick_goes_on() -> None:
+    robot = FakeRobot(faults={2: Fault(ContinuationLateError("the motion it continues has run out"), at=0.0)})
+    cell = FakeCell(FakeVision(seen(rod_at(0.5, 0.1))), robot=robot, config=_flowing())
+    outcome = await asyncio.wait_for(cell.run(TaskKind.STAND_ROD), 60)
+    assert outcome.success
+    parts = _set_off_pieces(cell)
+    # the third piece was refused: the arm rests where the second ended, and the move to the pre-grasp
+    # is planned from there
+    assert cell.moves()[:3] == [SET_OFF] * 3 and cell.moves()[3] == "PRE_GRASP"
+    assert any(
+        np.allclose(r.start, parts[1].positions[-1]) and r.labels[0] == "PRE_GRASP"
+        for r in cell.motion.requests
+    )
+
+
+async def test_a_cube_s_set_off_goes_whole_its_plan_turns_the_jaws_first() -> None:
+    """A cube's set-off keeps the jaws as they are (its faces are not known yet): its plan turns them at
+    the pre-grasp, so no way on straight down is looked for and the set-off goes in one call."""
+    cubes = (SeenCube(np.array([0.62, -0.2, 0.025]), "red"),)  # far enough for a rod's set-off to be cut
+    robot = PacedRobot()
+    cell = FakeCell(FakeVision(seen(cubes=cubes)), robot=robot, config=_flowing())
+    outcome = await asyncio.wait_for(cell.run(TaskKind.SORT_CUBES), 60)
+    assert outcome.success
+    assert not [r for r in cell.motion.requests if r.start_velocity is not None]
+    assert cell.moves()[:3] == [SET_OFF, "PRE_GRASP", "GRASP"] and SET_OFF not in robot.continued

@@ -60,6 +60,11 @@ class TaskSettings(Model):
     # Once vision has seen the object the arm sets off toward a pose above it (the approach height, jaws
     # across a rod) while the grasp plans from there: the planning no longer holds the arm at rest.
     set_off_before_planned: bool = True
+    # The set-off goes out in pieces; once the grasp plan is in, the rest of it and the grasp line are
+    # planned as one motion from where the arm will be, and replace the pieces not yet sent: the arm does
+    # not stop above the object (at 1x; at a faster twin the whole set-off is queued before the plan is
+    # in). The jaws open before the arm sets off.
+    set_off_flows_on: bool = True
     # A rod grasped this far or farther off its centre turns in the jaws as it is stood up (its weight
     # twists it: 1-6° in the twin). Held above the place, vision measures its axis; more than
     # straighten_min_deg off the vertical, the tool turns it straight before the touch-down (0: never
