@@ -69,7 +69,9 @@ class SetOffRun:
                 log.debug("the way on from the set-off's piece %d is late: from the next one's", index)
                 self._plan_way_on(index + 2)
             return None
-        if task.cancelled() or task.exception() is not None:
+        if task.cancelled() or (exc := task.exception()) is not None:
+            if not task.cancelled():
+                log.warning("planning the way on from the set-off failed: %r", exc)
             self._way_on = None
             return None
         cut, way = task.result()
