@@ -131,27 +131,24 @@ class PickPlanning:
         g = next((i for i, w in enumerate(plan.waypoints) if w.gripper is GripperCommand.CLOSE), None)
         if g is None or not grasp_approach(plan, g) or not all(blends(plan, i) for i in range(g)):
             return None
-        tolerance = self.config.corner_tolerance_m
-        moves = [
-            Move(
-                MotionKind.JOINT,
-                end,
-                label=SET_OFF,
-                blend=True,
-                blend_tolerance_m=tolerance,
-                obstacles=set_off.scene,
-            )
-        ]
-        for i in range(g):
+        for i in range(g):  # every move before the grasp line ends where the set-off does (the pre-grasp)
             m = move_to(plan, i)
             if m is not None and not (
                 m.kind is MotionKind.JOINT and m.target.ndim == 1 and near(m.target, end)
             ):
-                return None  # not where the set-off ends (the pre-grasp on the approach line)
+                return None
         line = move_to(plan, g)
         if line is None:
             return None
-        moves.append(replace(line, blend=False, blend_tolerance_m=0.0))
+        rest = Move(
+            MotionKind.JOINT,
+            end,
+            label=SET_OFF,
+            blend=True,
+            blend_tolerance_m=self.config.corner_tolerance_m,
+            obstacles=set_off.scene,
+        )
+        moves = [rest, replace(line, blend=False, blend_tolerance_m=0.0)]
         try:
             planned_moves = await self.motion.plan_moves(q, moves, planned.obstacles, qd)
         except RobotError as exc:
