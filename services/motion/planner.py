@@ -47,7 +47,7 @@ from services.kinematics.trajectory import (
 )
 from services.motion.corners import Corner, max_rounding, round_corner, with_corners
 from services.motion.sampling import PLANNERS, plan_path, seed_planning
-from services.motion.timing import time_parameterize
+from services.motion.timing import moving_start, time_parameterize
 
 log = logging.getLogger("pickplace.motion.planner")
 
@@ -609,7 +609,8 @@ def time_runs(
     ``start_velocity`` (nonzero): the arm is moving at ``start``; the first run is timed from that
     motion, as one blend even of a single move, or TrajectoryLimitError (it cannot stop at a waypoint
     it was not planned to stop at)."""
-    moving = start_velocity is not None and bool(np.any(np.asarray(start_velocity) != 0.0))
+    start_velocity = moving_start(start_velocity, start.size)
+    moving = start_velocity is not None
     pieces: list[JointTrajectory] = []
     notes: list[str] = []
     q = start

@@ -32,6 +32,7 @@ from services.kinematics.robot_models import ROBOTS
 from services.kinematics.tool import tool_geometry
 from services.kinematics.trajectory import Array, JointTrajectory
 from services.motion.planner import BlendPart, MotionPlanner, Plan, PlannerConfig, time_runs
+from services.motion.timing import moving_start
 
 log = logging.getLogger("pickplace.motion.service")
 
@@ -69,7 +70,7 @@ def _start_velocity(values: Iterable[float], dof: int) -> Array | None:
         raise InvalidInputError(f"start_velocity has {v.size} values for {dof} start joints")
     if not np.all(np.isfinite(v)):
         raise InvalidInputError("start_velocity contains NaN or infinite values")
-    return v if bool(np.any(v != 0.0)) else None
+    return moving_start(v, dof)
 
 
 CEILING_HALF_SPAN_M = 10.0  # the box standing for the workspace's top: wider than any arm's reach

@@ -176,6 +176,14 @@ def rest_to_rest(
     return traj
 
 
+def moving_start(start_velocity: ArrayLike | None, dof: int) -> Array | None:
+    """A start velocity as one value per joint, or None when the arm is at rest (none given, or all zero)."""
+    if start_velocity is None:
+        return None
+    v0 = joint_vector(start_velocity, dof, "start velocity")
+    return v0 if bool(np.any(v0 != 0.0)) else None
+
+
 def _dedupe(path: Array) -> Array:
     keep = np.ones(path.shape[0], dtype=bool)
     keep[1:] = np.max(np.abs(np.diff(path, axis=0)), axis=1) > 1e-9
@@ -331,8 +339,8 @@ def toppra_path(
     that starts in motion keeps its start velocity, and is refused instead.
     """
     p = _dedupe(joint_path(path, limits.dof, "path"))
-    v0 = None if start_velocity is None else joint_vector(start_velocity, limits.dof, "start velocity")
-    moving = v0 is not None and float(np.max(np.abs(v0))) > 0.0
+    v0 = moving_start(start_velocity, limits.dof)
+    moving = v0 is not None
     if p.shape[0] == 1 and not moving:
         return JointTrajectory.hold(joint_names, p[0])
     if p.shape[0] == 2 and not moving:
@@ -344,7 +352,7 @@ def toppra_path(
     sd_start = 0.0
     v_scale = scale
     bc: object = "clamped"
-    if v0 is not None and moving:
+    if v0 is not None:
         # the spline leaves the start along the arm's velocity, at the chord's own rate (|dq/ds| = the
         # path's length): the path velocity is then |v0| / length
         speed = float(np.linalg.norm(v0))
@@ -467,8 +475,8 @@ def time_parameterize(
     p = _dedupe(joint_path(path, limits.dof, "path"))
     for k in range(p.shape[0]):
         limits.check_positions(p[k], f"path point {k}")
-    if start_velocity is not None:
-        v0 = joint_vector(start_velocity, limits.dof, "start velocity")
+    v0 = moving_start(start_velocity, limits.dof)
+    if v0 is not None:
         if method not in ("auto", "toppra"):
             raise InvalidInputError(f"a motion that starts in motion is timed by TOPP-RA, not {method}")
         return _timed_verified(p, limits, joint_names, dt, "toppra", v0)
@@ -512,7 +520,7 @@ def _timed_verified(
                 traj = rest_to_rest(p, limits, joint_names, dt=dt, scale=scale)
             else:
                 traj = toppra_path(p, limits, joint_names, dt=dt, scale=scale, start_velocity=start_velocity)
-            moving = start_velocity is not None and bool(np.any(start_velocity != 0.0))
+            moving = start_velocity is not None
             report = verify_trajectory(traj, limits, start=p[0], goal=p[-1], at_rest=not moving)
             if moving and float(np.max(np.abs(traj.velocities[-1]))) > 1e-6:
                 raise TrajectoryLimitError("trajectory does not end at rest")

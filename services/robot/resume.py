@@ -51,6 +51,11 @@ def warp(steps: int, half: int, end: float) -> np.ndarray:
     return np.minimum(u, end)
 
 
+def smoothstep5(x: np.ndarray) -> np.ndarray:
+    """The quintic smoothstep on [0, 1]: 0 to 1 with zero speed and acceleration at both ends."""
+    return x**3 * (10.0 - 15.0 * x + 6.0 * x**2)
+
+
 def _sample(points: np.ndarray, u: np.ndarray) -> np.ndarray:
     i = np.minimum(np.floor(u).astype(int), len(points) - 2)
     f = (u - i)[:, None]
@@ -102,7 +107,7 @@ def _to_rest(
     n = max(4, int(np.ceil(end)))
     while n * period_s <= MAX_RAMP_S:
         x = np.arange(1, n + 1, dtype=float) / n
-        targets = _sample(points, end * x**3 * (10.0 - 15.0 * x + 6.0 * x**2))
+        targets = _sample(points, end * smoothstep5(x))
         try:
             check_from_rest(targets, rest, period_s, limits, "re-timed trajectory")
         except LimitViolationError:
@@ -131,7 +136,7 @@ def ease_in_offset(
     for span in EASE_IN_SPANS_S:
         n = max(1, min(len(targets), round(span / period_s)))
         x = np.minimum(np.arange(1, len(targets) + 1) / n, 1.0)
-        weight = 1.0 - x**3 * (10.0 - 15.0 * x + 6.0 * x**2)
+        weight = 1.0 - smoothstep5(x)
         eased = targets + weight[:, None] * offset[None, :]
         try:
             check_from_rest(eased, rest, period_s, limits, "eased-in trajectory")
